@@ -1,0 +1,84 @@
+//! `semdynreg export RUN --time T --out F.ply` or `--times a:b:step --out DIR`: the
+//! Gaussians deformed to time t, as standard 3DGS PLYs any viewer opens.
+
+use anyhow::{bail, Context, Result};
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    pub run: PathBuf,
+    /// One time in [0, 1]; --out is the PLY file.
+    #[arg(long, conflicts_with = "times")]
+    pub time: Option<f32>,
+    /// A sequence `a:b:step` (inclusive of b within rounding); --out is a folder.
+    #[arg(long)]
+    pub times: Option<String>,
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Parses `a:b:step` into the times a, a+step, … ≤ b.
+pub fn parse_times(s: &str) -> Result<Vec<f32>> {
+    let parts: Vec<f32> = s
+        .split(':')
+        .map(|p| {
+            p.trim()
+                .parse::<f32>()
+                .with_context(|| format!("`{p}` in --times `{s}` is not a number"))
+        })
+        .collect::<Result<_>>()?;
+    let [a, b, step] = parts[..] else {
+        bail!("--times `{s}` must be a:b:step")
+    };
+    if step.is_nan()
+        || step <= 0.0
+        || b < a
+        || !(0.0..=1.0).contains(&a)
+        || !(0.0..=1.0).contains(&b)
+    {
+        bail!("--times `{s}` needs 0 ≤ a ≤ b ≤ 1 and step > 0");
+    }
+    let n = ((b - a) / step + 1e-4).floor() as usize;
+    Ok((0..=n).map(|k| a + k as f32 * step).collect())
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let mut r = super::render::LoadedRun::open(&a.run)?;
+    let (times, single) = match (&a.time, &a.times) {
+        (Some(t), None) if (0.0..=1.0).contains(t) => (vec![*t], true),
+        (Some(t), None) => bail!("--time {t} is outside [0, 1]"),
+        (None, Some(s)) => (parse_times(s)?, false),
+        _ => bail!("give --time T or --times a:b:step"),
+    };
+    if !single {
+        std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    }
+    for t in &times {
+        let active = r.iteration >= r.cfg.field.warm_up;
+        let m = train::render::deformed_model(&r.model, active.then_some(&mut r.field), *t);
+        let path = if single {
+            a.out.clone()
+        } else {
+            a.out.join(format!("t_{t:.4}.ply"))
+        };
+        train::ply::write(&path, &m).with_context(|| format!("writing {}", path.display()))?;
+    }
+    println!("{} PLY file(s) → {}", times.len(), a.out.display());
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn times_parse() {
+        assert_eq!(
+            parse_times("0:1:0.25").unwrap(),
+            vec![0.0, 0.25, 0.5, 0.75, 1.0]
+        );
+        assert!(parse_times("0:1").is_err());
+        assert!(parse_times("0.5:0.2:0.1").is_err());
+        assert!(parse_times("0:1:0").is_err());
+    }
+}

@@ -1,0 +1,94 @@
+//! `semdynreg render RUN [--split test] [--time T]`: PNGs of a split's cameras from the
+//! latest checkpoint, each at its own time or all at time T, into `RUN/renders/<split>/`.
+//! Also holds [`LoadedRun`], shared by `eval` and `export`.
+
+use anyhow::{bail, Context, Result};
+use std::path::{Path, PathBuf};
+use train::render::{EvalReport, Renderer};
+use train::{checkpoint, DeformField, GaussianModel, TrainConfig};
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    pub run: PathBuf,
+    #[arg(long, default_value = "test")]
+    pub split: String,
+    /// Render every camera at this time in [0, 1] instead of its own.
+    #[arg(long)]
+    pub time: Option<f32>,
+}
+
+/// The latest checkpoint of a run with its data set.
+pub struct LoadedRun {
+    pub cfg: TrainConfig,
+    pub model: GaussianModel,
+    pub field: DeformField,
+    pub iteration: u32,
+    pub dataset: scene::Dataset,
+    pub renderer: Renderer,
+}
+
+impl LoadedRun {
+    pub fn open(run: &Path) -> Result<Self> {
+        let info = train::run::RunInfo::load(run)?;
+        let dir = checkpoint::latest(run)?;
+        let (cfg, model, field, iteration) =
+            checkpoint::load_model(&dir).with_context(|| format!("loading {}", dir.display()))?;
+        let dataset = info
+            .dataset()
+            .with_context(|| format!("loading {}", info.scene.display()))?;
+        Ok(Self {
+            cfg,
+            model,
+            field,
+            iteration,
+            dataset,
+            renderer: Renderer::default(),
+        })
+    }
+
+    pub fn split(&self, name: &str) -> Result<&[scene::Frame]> {
+        match name {
+            "train" => Ok(&self.dataset.train),
+            "val" => Ok(&self.dataset.val),
+            "test" => Ok(&self.dataset.test),
+            s => bail!("unknown split `{s}` (train, val or test)"),
+        }
+    }
+
+    pub fn evaluate(&mut self, frames: &[scene::Frame]) -> Result<EvalReport> {
+        let bg = self.dataset.background;
+        let active = self.iteration >= self.cfg.field.warm_up;
+        Ok(self
+            .renderer
+            .evaluate(&self.model, active.then_some(&mut self.field), frames, bg)?)
+    }
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let mut r = LoadedRun::open(&a.run)?;
+    if let Some(t) = a.time {
+        if !(0.0..=1.0).contains(&t) {
+            bail!("--time {t} is outside [0, 1]");
+        }
+    }
+    let frames = r.split(&a.split)?.to_vec();
+    let dir = a.run.join("renders").join(&a.split);
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let bg = r.dataset.background;
+    for (i, fr) in frames.iter().enumerate() {
+        let t = a.time.unwrap_or(fr.time);
+        let active = r.iteration >= r.cfg.field.warm_up;
+        let img = r
+            .renderer
+            .render(&r.model, active.then_some(&mut r.field), &fr.camera, t, bg)?;
+        let png = scene::ImageU8::from_f32(fr.camera.width, fr.camera.height, &img);
+        let name = match a.time {
+            Some(t) => format!("{i:04}_t{t:.3}.png"),
+            None => format!("{i:04}.png"),
+        };
+        png.save_png(&dir.join(&name))
+            .with_context(|| format!("writing {name}"))?;
+    }
+    println!("{} images → {}", frames.len(), dir.display());
+    Ok(())
+}

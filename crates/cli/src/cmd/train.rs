@@ -1,0 +1,188 @@
+//! `semdynreg train SCENE --out RUN [--config F.toml] [--iters N] [--downscale D]
+//! [--seed S] [--resume]`: deformable 3DGS training (issue 5) with a progress bar, a JSONL
+//! metrics log (`RUN/metrics.jsonl`), periodic test evaluation, and atomic checkpoints every
+//! `log.checkpoint_interval` iterations, at the end, and on Ctrl-C.
+
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+use train::run::RunInfo;
+use train::{checkpoint, TrainConfig, Trainer};
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Scene folder (D-NeRF/Blender layout, toycars, or Nerfies). Optional with --resume.
+    pub scene: Option<PathBuf>,
+    /// Run folder: checkpoints, config, metrics log.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// TOML config overriding the defaults (unknown keys are errors).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Rescale the whole schedule to N iterations.
+    #[arg(long)]
+    pub iters: Option<u32>,
+    /// Integer image downscale factor.
+    #[arg(long, default_value_t = 1)]
+    pub downscale: u32,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Composite RGBA images on white instead of black.
+    #[arg(long)]
+    pub white_background: bool,
+    /// Continue the run in --out from its latest checkpoint.
+    #[arg(long)]
+    pub resume: bool,
+}
+
+fn fresh(a: &Args) -> Result<Trainer> {
+    let Some(scene_dir) = &a.scene else {
+        bail!(
+            "a SCENE folder is required (or --resume to continue {})",
+            a.out.display()
+        );
+    };
+    if a.out.join(train::run::RUN_FILE).exists() {
+        bail!(
+            "{} already holds a run; use --resume or another --out",
+            a.out.display()
+        );
+    }
+    let mut cfg = match &a.config {
+        Some(p) => TrainConfig::from_toml_file(p)?,
+        None => TrainConfig::default(),
+    };
+    if let Some(n) = a.iters {
+        cfg = cfg.rescaled(n)?;
+    }
+    let scene = std::fs::canonicalize(scene_dir)
+        .with_context(|| format!("scene folder {}", scene_dir.display()))?;
+    let bg = if a.white_background { 1.0 } else { 0.0 };
+    let info = RunInfo {
+        scene,
+        downscale: a.downscale,
+        background: [bg; 3],
+        seed: a.seed,
+    };
+    let dataset = info
+        .dataset()
+        .with_context(|| format!("loading {}", info.scene.display()))?;
+    info.save(&a.out)?;
+    let trainer = Trainer::new(cfg, dataset, a.seed)?;
+    tracing::info!(
+        gaussians = trainer.state.len(),
+        extent = trainer.extent,
+        "initialized"
+    );
+    Ok(trainer)
+}
+
+fn resumed(a: &Args) -> Result<Trainer> {
+    if a.config.is_some() || a.iters.is_some() {
+        bail!("--resume continues with the run's saved config; drop --config/--iters");
+    }
+    let info = RunInfo::load(&a.out)?;
+    let dataset = info
+        .dataset()
+        .with_context(|| format!("loading {}", info.scene.display()))?;
+    let dir = checkpoint::latest(&a.out)?;
+    let trainer = checkpoint::load_trainer(&dir, dataset)
+        .with_context(|| format!("resuming from {}", dir.display()))?;
+    tracing::info!(
+        iteration = trainer.iteration,
+        "resumed from {}",
+        dir.display()
+    );
+    Ok(trainer)
+}
+
+fn append_jsonl(path: &Path, value: &serde_json::Value) -> Result<()> {
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .with_context(|| format!("opening {}", path.display()))?;
+    writeln!(f, "{value}").with_context(|| format!("writing {}", path.display()))
+}
+
+fn progress_bar(tr: &Trainer) -> ProgressBar {
+    let pb = ProgressBar::new(tr.cfg.iterations as u64);
+    pb.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} {msg} {per_sec} ETA {eta}")
+            .expect("static template")
+            .progress_chars("=> "),
+    );
+    pb.set_position(tr.iteration as u64);
+    pb.reset_eta();
+    pb
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let mut tr = if a.resume { resumed(&a)? } else { fresh(&a)? };
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = stop.clone();
+    ctrlc::set_handler(move || s.store(true, Ordering::SeqCst))
+        .context("installing the Ctrl-C handler")?;
+    let log = a.out.join("metrics.jsonl");
+    let pb = progress_bar(&tr);
+    let start = Instant::now();
+    let first = tr.iteration;
+    while tr.iteration < tr.cfg.iterations {
+        let st = tr.step()?;
+        let it = st.iteration;
+        pb.set_position(it as u64);
+        pb.set_message(format!(
+            "loss {:.4} PSNR {:.2} #G {}",
+            st.loss.total, st.psnr, st.num_gaussians
+        ));
+        let l = tr.cfg.log.clone();
+        if l.log_interval > 0 && it % l.log_interval == 0 {
+            let secs = start.elapsed().as_secs_f64();
+            let line = serde_json::json!({"iteration": it, "loss": st.loss.total, "l1": st.loss.l1, "ssim": st.loss.ssim,
+                "psnr": st.psnr, "num_gaussians": st.num_gaussians, "elapsed_s": secs,
+                "it_per_s": (it - first) as f64 / secs.max(1e-9)});
+            append_jsonl(&log, &line)?;
+        }
+        if l.eval_interval > 0 && it % l.eval_interval == 0 && !tr.dataset.test.is_empty() {
+            let rep = tr.evaluate_test(l.eval_frames)?;
+            pb.println(format!(
+                "[{it}] test PSNR {:.3} SSIM {:.4}",
+                rep.mean.psnr, rep.mean.ssim
+            ));
+            append_jsonl(
+                &log,
+                &serde_json::json!({"iteration": it, "test_psnr": rep.mean.psnr, "test_ssim": rep.mean.ssim}),
+            )?;
+        }
+        let interrupted = stop.load(Ordering::SeqCst);
+        if (l.checkpoint_interval > 0 && it % l.checkpoint_interval == 0) || interrupted {
+            let dir = checkpoint::save(&tr, &a.out)?;
+            tracing::info!("checkpoint {}", dir.display());
+        }
+        if interrupted {
+            pb.abandon_with_message(format!("interrupted at {it}; continue with --resume"));
+            return Ok(());
+        }
+    }
+    pb.finish();
+    checkpoint::save(&tr, &a.out)?;
+    write_timings(&tr, &a.out, start.elapsed().as_secs_f64(), first)?;
+    Ok(())
+}
+
+/// `RUN/timings.json`: wall time and the per-phase breakdown (ms per iteration).
+fn write_timings(tr: &Trainer, run: &Path, wall: f64, first: u32) -> Result<()> {
+    let phases: serde_json::Map<String, serde_json::Value> = tr
+        .timings
+        .per_iteration_ms()
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v.into()))
+        .collect();
+    let v = serde_json::json!({"wall_s": wall, "iterations": tr.iteration - first,
+        "num_gaussians": tr.state.len(), "ms_per_iteration": phases});
+    scene::io::write_json(&run.join("timings.json"), &v).context("writing timings.json")
+}

@@ -1,0 +1,55 @@
+//! The `semdynreg` command line. Each subcommand lives in `cmd/<name>.rs` with its own
+//! clap `Args` and a `run` function; this file only dispatches.
+
+mod cmd;
+mod report;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(
+    name = "semdynreg",
+    version,
+    about = "Semantics-guided deformable 3D Gaussian Splatting on the CPU"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    // SUBCOMMANDS (one line each, alphabetical)
+    Compare(cmd::compare::Args),
+    Eval(cmd::eval::Args),
+    Export(cmd::export::Args),
+    Metrics(cmd::metrics::Args),
+    Render(cmd::render::Args),
+    Segment(cmd::segment::Args),
+    Synth(cmd::synth::Args),
+    Train(cmd::train::Args),
+    RenderCase(cmd::render_case::Args),
+}
+
+fn main() -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match cli.command {
+        // DISPATCH (one arm each)
+        Command::Compare(a) => cmd::compare::run(a),
+        Command::Eval(a) => cmd::eval::run(a),
+        Command::Export(a) => cmd::export::run(a),
+        Command::Metrics(a) => cmd::metrics::run(a),
+        Command::Render(a) => cmd::render::run(a),
+        Command::Segment(a) => cmd::segment::run(a),
+        Command::Synth(a) => cmd::synth::run(a),
+        Command::Train(a) => cmd::train::run(a),
+        Command::RenderCase(a) => cmd::render_case::run(a),
+    }
+}

@@ -1,0 +1,114 @@
+//! `deformation_consistency_rms` of a trained run (issue 6): the metric is defined and
+//! computed by `train::regularizer::consistency`; this file only feeds it from a run folder.
+//!
+//! Choices: the vehicle groups are built once, at the earliest test frame (`t_ref`), from
+//! the top-k (k of the regularizer's default config) of the run's render at `t_ref` and the
+//! ground-truth mask of that view; every vehicle (moving and static) is tracked; errors are
+//! taken at every test frame with the field evaluated on all Gaussians.
+
+use anyhow::{bail, Context, Result};
+use scene::objects::ObjectsFile;
+use scene::Frame;
+use splat::{Colors, Gaussians, Rasterizer, RenderOptions};
+use std::path::Path;
+use train::model::{GaussianModel, SH_COEFFS};
+use train::regularizer::{
+    ConsistencyAccumulator, ConsistencyReport, ObjectGroups, ObjectTrack, RegConfig, TopKView,
+};
+use train::render::deformed_model;
+use train::{checkpoint, run::RunInfo, DeformField};
+
+/// Top-k ids of a render of `m` (already deformed) from `frame`'s camera.
+fn render_topk(
+    m: &GaussianModel,
+    frame: &Frame,
+    background: [f32; 3],
+    k: usize,
+) -> Result<Vec<u32>> {
+    let scales: Vec<f32> = m.log_scales.iter().map(|s| s.exp()).collect();
+    let g = Gaussians {
+        means: &m.means,
+        quats: &m.quats,
+        scales: &scales,
+        opacity_logits: &m.opacity_logits,
+        colors: Colors::Sh {
+            coeffs: &m.sh,
+            num_coeffs: SH_COEFFS,
+            degree: m.sh_degree,
+        },
+    };
+    let opts = RenderOptions {
+        background,
+        topk: k,
+        ..RenderOptions::default()
+    };
+    let mut raster = Rasterizer::new();
+    Ok(raster.forward(&g, &frame.camera, &opts)?.topk_ids.to_vec())
+}
+
+/// Deformed Gaussians at `t` (canonical ones while the field is still in warm-up).
+fn at_time(model: &GaussianModel, field: &mut Option<DeformField>, t: f32) -> GaussianModel {
+    deformed_model(model, field.as_mut(), t)
+}
+
+/// The metric for the latest checkpoint of `run`, over its scene's test frames.
+pub fn run_consistency(run: &Path) -> Result<ConsistencyReport> {
+    let info = RunInfo::load(run)?;
+    let ds = info
+        .dataset()
+        .with_context(|| format!("loading {}", info.scene.display()))?;
+    let objects_path = info.scene.join("objects.json");
+    let objects = ObjectsFile::load(&objects_path)?;
+    let dir = checkpoint::latest(run)?;
+    let (cfg, model, field, iteration) =
+        checkpoint::load_model(&dir).with_context(|| format!("loading {}", dir.display()))?;
+    let mut field = (iteration >= cfg.field.warm_up).then_some(field);
+    let mut test: Vec<&Frame> = ds.test.iter().collect();
+    test.sort_by(|a, b| a.time.total_cmp(&b.time));
+    let Some(reference) = test.first().copied() else {
+        bail!("{} has no test frames", ds.root.display());
+    };
+    let mask = scene::load_mask(&ds.gt_mask_path(reference))?;
+    let k = RegConfig::default().k;
+    let anchor = at_time(&model, &mut field, reference.time);
+    let ids = render_topk(&anchor, reference, ds.background, k)?;
+    let mut groups = ObjectGroups::new();
+    groups.build(
+        TopKView {
+            ids: &ids,
+            stride: k,
+        },
+        k,
+        &mask.data,
+        model.len(),
+    )?;
+    let pose = |f: &Frame| {
+        objects.frame(&f.file_path).with_context(|| {
+            format!(
+                "{} has no pose for frame {}",
+                objects_path.display(),
+                f.file_path
+            )
+        })
+    };
+    let pose_ref = pose(reference)?;
+    let mut acc = ConsistencyAccumulator::new();
+    for f in &test {
+        let pose_t = pose(f)?;
+        let deformed = at_time(&model, &mut field, f.time);
+        let mut tracks = Vec::new();
+        for g in groups.iter() {
+            let Some(i) = objects.objects.iter().position(|o| o.id == g.object) else {
+                continue; // an ID in the mask that objects.json does not list
+            };
+            tracks.push(ObjectTrack {
+                object: g.object,
+                members: g.members,
+                pose_ref: &pose_ref.object_to_world[i],
+                pose_t: &pose_t.object_to_world[i],
+            });
+        }
+        acc.add_time(f.time, &tracks, &anchor.means, &deformed.means)?;
+    }
+    Ok(acc.report()?)
+}

@@ -1,0 +1,150 @@
+//! The `DIR/results.json` model of `semdynreg compare` (issue 6, item 3).
+//!
+//! The issue fixes the required keys; every one of them is always present (a number, or
+//! `null` where it cannot be measured, with the reason in `notes`). `Option` fields are
+//! therefore never skipped during serialization.
+
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// PSNR (dB), SSIM and LPIPS of one comparison. `None` is written as `null`: LPIPS when
+/// its weights are absent; PSNR when it is not finite (identical crops); any metric when
+/// no frame could be scored.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Scores {
+    pub psnr: Option<f64>,
+    pub ssim: Option<f64>,
+    pub lpips: Option<f64>,
+}
+
+/// Scores of one crop at one of the paper's time steps (t = 0, 1, …, 5 s).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TimedScores {
+    pub t_seconds: u32,
+    pub psnr: Option<f64>,
+    pub ssim: Option<f64>,
+    pub lpips: Option<f64>,
+    /// The evaluation frame nearest to `t_seconds` (its `file_path`) and its time in [0, 1].
+    pub frame: String,
+    pub time: f32,
+    /// The padded crop box `[x, y, width, height]` in pixels; `None` when the object is not
+    /// visible in that frame's ground-truth mask (the scores are then `null`).
+    pub crop: Option<[u32; 4]>,
+}
+
+impl TimedScores {
+    pub fn scores(&self) -> Scores {
+        Scores {
+            psnr: self.psnr,
+            ssim: self.ssim,
+            lpips: self.lpips,
+        }
+    }
+}
+
+/// Crop scores of one object across the time steps, and their mean.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CropSeries {
+    pub per_time: Vec<TimedScores>,
+    pub mean: Scores,
+}
+
+/// Everything measured for one trained run (the baseline or SemDynReg).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MethodResults {
+    /// Mean over all evaluation frames of the per-frame scores.
+    pub full_frame: Scores,
+    /// The moving object's crop (the paper's Tables 1 and 2).
+    pub moving_object_crop: CropSeries,
+    /// One entry per static object, keyed by its name in `objects.json`.
+    pub static_object_crops: BTreeMap<String, CropSeries>,
+    /// RMS distance (world units) between the object Gaussians' deformed positions and their
+    /// positions under the ground-truth rigid motion, averaged over test times; lower is
+    /// better. `null` when not computed (see `notes`).
+    pub deformation_consistency_rms: Option<f64>,
+    /// Where the rendered frames came from.
+    pub renders: String,
+}
+
+/// How the numbers were produced, so that a reader can reproduce them.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Protocol {
+    /// The data split whose frames are scored (`test`).
+    pub split: String,
+    /// Seconds spanned by time 0 → 1 (toycars: 6 s).
+    pub duration_s: f32,
+    /// The time steps of the crop tables, in seconds.
+    pub t_seconds: Vec<u32>,
+    /// Human-readable crop policy (padding, clamping).
+    pub crop_policy: String,
+    /// Which SSIM variant and which LPIPS network (or why LPIPS is absent).
+    pub ssim_variant: String,
+    pub lpips: String,
+    /// Name of the moving object, from `objects.json`.
+    pub moving_object: String,
+}
+
+/// The whole `results.json`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Results {
+    pub baseline: MethodResults,
+    pub semdynreg: MethodResults,
+    pub scene: String,
+    /// The command lines that produced both runs and this evaluation.
+    pub commands: Vec<String>,
+    /// The resolved configuration of each run (as read from the run), or `null`.
+    pub config: BTreeMap<String, serde_json::Value>,
+    pub protocol: Protocol,
+    /// Caveats (missing LPIPS weights, missing consistency metric, …).
+    pub notes: Vec<String>,
+}
+
+/// Mean of the present values of one metric; `None` when none is present.
+pub fn mean_of(values: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    let (sum, n) = values
+        .flatten()
+        .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    (n > 0).then(|| sum / n as f64)
+}
+
+/// Element-wise mean of a set of scores (each metric over the entries where it is present).
+pub fn mean_scores(items: &[Scores]) -> Scores {
+    Scores {
+        psnr: mean_of(items.iter().map(|s| s.psnr)),
+        ssim: mean_of(items.iter().map(|s| s.ssim)),
+        lpips: mean_of(items.iter().map(|s| s.lpips)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mean_skips_missing_values() {
+        let s = [
+            Scores {
+                psnr: Some(20.0),
+                ssim: Some(0.5),
+                lpips: None,
+            },
+            Scores {
+                psnr: Some(30.0),
+                ssim: None,
+                lpips: None,
+            },
+        ];
+        let m = mean_scores(&s);
+        assert_eq!(m.psnr, Some(25.0));
+        assert_eq!(m.ssim, Some(0.5));
+        assert_eq!(m.lpips, None);
+    }
+
+    #[test]
+    fn null_fields_are_written_not_skipped() {
+        let json = serde_json::to_value(MethodResults::default()).unwrap();
+        assert!(json["full_frame"].get("lpips").unwrap().is_null());
+        assert!(json.get("deformation_consistency_rms").unwrap().is_null());
+        assert!(json["moving_object_crop"]["per_time"].is_array());
+    }
+}

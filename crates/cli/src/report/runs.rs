@@ -1,0 +1,175 @@
+//! The two training runs of `compare`: each is trained (or resumed, or reused when
+//! finished) and rendered by running this same executable's `train` and `render`
+//! subcommands, so that a run made by `compare` is exactly a run made by hand, and the
+//! recorded command lines reproduce it.
+
+use anyhow::{bail, Context, Result};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use train::{checkpoint, run::RUN_FILE};
+
+/// Settings shared by both runs (the same seed and schedule, issue 6).
+#[derive(Clone, Debug)]
+pub struct TrainSettings {
+    pub scene: PathBuf,
+    pub iters: Option<u32>,
+    pub seed: u64,
+    pub config: Option<PathBuf>,
+    pub downscale: u32,
+    pub white_background: bool,
+}
+
+/// One run of the comparison.
+#[derive(Clone, Debug)]
+pub struct RunPlan {
+    pub label: &'static str,
+    pub dir: PathBuf,
+    /// The SemDynReg loss on (`--reg`) or off (`--no-reg`).
+    pub reg: bool,
+}
+
+/// How far a run folder got.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RunState {
+    Missing,
+    Unfinished { iteration: u32, total: u32 },
+    Finished,
+}
+
+/// Reads the run's latest checkpoint to see whether it reached its schedule's end.
+pub fn run_state(dir: &Path) -> Result<RunState> {
+    if !dir.join(RUN_FILE).is_file() {
+        return Ok(RunState::Missing);
+    }
+    let ckpt = checkpoint::latest(dir).with_context(|| {
+        format!(
+            "{} holds a run without a checkpoint; delete it to start over",
+            dir.display()
+        )
+    })?;
+    let (cfg, _, _, iteration) =
+        checkpoint::load_model(&ckpt).with_context(|| format!("reading {}", ckpt.display()))?;
+    Ok(if iteration >= cfg.iterations {
+        RunState::Finished
+    } else {
+        RunState::Unfinished {
+            iteration,
+            total: cfg.iterations,
+        }
+    })
+}
+
+/// `train` arguments for a fresh run, or `--resume` for an unfinished one.
+pub fn train_args(plan: &RunPlan, s: &TrainSettings, state: RunState) -> Vec<String> {
+    let out = plan.dir.display().to_string();
+    if let RunState::Unfinished { .. } = state {
+        return vec!["train".into(), "--out".into(), out, "--resume".into()];
+    }
+    let mut a = vec![
+        "train".into(),
+        s.scene.display().to_string(),
+        "--out".into(),
+        out,
+    ];
+    a.extend(["--seed".into(), s.seed.to_string()]);
+    a.extend(["--downscale".into(), s.downscale.to_string()]);
+    if let Some(n) = s.iters {
+        a.extend(["--iters".into(), n.to_string()]);
+    }
+    if let Some(c) = &s.config {
+        a.extend(["--config".into(), c.display().to_string()]);
+    }
+    if s.white_background {
+        a.push("--white-background".into());
+    }
+    a.push(if plan.reg { "--reg" } else { "--no-reg" }.into());
+    a
+}
+
+/// Runs `semdynreg ARGS` (this executable) with inherited output; returns its command line.
+pub fn run_self(args: &[String]) -> Result<String> {
+    let exe = std::env::current_exe().context("locating the semdynreg executable")?;
+    let line = format!("semdynreg {}", args.join(" "));
+    tracing::info!("running: {line}");
+    let status = Command::new(&exe)
+        .args(args)
+        .status()
+        .with_context(|| format!("starting {}", exe.display()))?;
+    if !status.success() {
+        bail!("`{line}` failed ({status})");
+    }
+    Ok(line)
+}
+
+/// Trains (unless finished) and renders the test split of a run; returns the commands run
+/// and the folder of renders (`RUN/renders/test`).
+pub fn prepare_run(plan: &RunPlan, s: &TrainSettings) -> Result<(Vec<String>, PathBuf)> {
+    let mut commands = Vec::new();
+    match run_state(&plan.dir)? {
+        RunState::Finished => {
+            tracing::info!(
+                "{}: reusing the finished run in {}",
+                plan.label,
+                plan.dir.display()
+            )
+        }
+        state => commands.push(run_self(&train_args(plan, s, state))?),
+    }
+    let dir = plan.dir.display().to_string();
+    commands.push(run_self(&[
+        "render".into(),
+        dir,
+        "--split".into(),
+        "test".into(),
+    ])?);
+    Ok((commands, plan.dir.join("renders").join("test")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn train_arguments_carry_the_shared_schedule() {
+        let s = TrainSettings {
+            scene: "sc".into(),
+            iters: Some(300),
+            seed: 7,
+            config: None,
+            downscale: 2,
+            white_background: false,
+        };
+        let plan = RunPlan {
+            label: "ours",
+            dir: "out/semdynreg".into(),
+            reg: true,
+        };
+        let a = train_args(&plan, &s, RunState::Missing).join(" ");
+        assert_eq!(
+            a,
+            "train sc --out out/semdynreg --seed 7 --downscale 2 --iters 300 --reg"
+        );
+        let plan = RunPlan { reg: false, ..plan };
+        assert!(train_args(&plan, &s, RunState::Missing)
+            .join(" ")
+            .ends_with("--no-reg"));
+        let resume = train_args(
+            &plan,
+            &s,
+            RunState::Unfinished {
+                iteration: 5,
+                total: 300,
+            },
+        );
+        assert_eq!(resume.join(" "), "train --out out/semdynreg --resume");
+    }
+
+    #[test]
+    fn missing_run_folder_is_missing() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(
+            run_state(&dir.path().join("nope")).unwrap(),
+            RunState::Missing
+        );
+    }
+}

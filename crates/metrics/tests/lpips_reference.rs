@@ -1,0 +1,100 @@
+//! LPIPS on the LPIPS project's official example images (`lpips_2imgs.py` defaults: AlexNet,
+//! v0.1): ex_ref vs ex_p0 = 0.722, ex_ref vs ex_p1 = 0.137 (three decimals, from the
+//! PerceptualSimilarity README). We get 0.72188 and 0.13757: the README's 0.137 is older
+//! than the released weights, with which the official `test_network.py` prints
+//! "(0.722, 0.138)" (richzhang/PerceptualSimilarity issue #120), so p1 is checked to ±1e-3. Needs the real weights (`scripts/fetch_lpips.sh DIR`,
+//! `SEMDYNREG_WEIGHTS=DIR`) and `../shared/reference/lpips`; skips with a printed reason when
+//! either is absent.
+
+use metrics::{load_rgb, Lpips, LpipsNet, RgbImage};
+use std::path::PathBuf;
+
+fn reference_dir() -> PathBuf {
+    // crates/metrics → repository root → ../shared beside it.
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    root.join("../shared/reference/lpips")
+}
+
+fn model(net: LpipsNet) -> Option<Lpips> {
+    match Lpips::from_env(net) {
+        Ok(m) => Some(m),
+        Err(e) => {
+            eprintln!("SKIPPED: {e}");
+            None
+        }
+    }
+}
+
+fn images() -> Option<[RgbImage; 3]> {
+    let dir = reference_dir();
+    let load = |n: &str| load_rgb(&dir.join(n));
+    match (load("ex_ref.png"), load("ex_p0.png"), load("ex_p1.png")) {
+        (Ok(r), Ok(p0), Ok(p1)) => Some([r, p0, p1]),
+        (Err(e), _, _) | (_, Err(e), _) | (_, _, Err(e)) => {
+            eprintln!("SKIPPED: reference images unavailable: {e}");
+            None
+        }
+    }
+}
+
+fn dist(m: &Lpips, a: &RgbImage, b: &RgbImage) -> f32 {
+    m.distance(&a.data, &b.data, a.width, a.height).unwrap()
+}
+
+#[test]
+fn alex_matches_official_example_values() {
+    let (Some(m), Some([r, p0, p1])) = (model(LpipsNet::Alex), images()) else {
+        return;
+    };
+    let d0 = dist(&m, &r, &p0);
+    let d1 = dist(&m, &r, &p1);
+    eprintln!("LPIPS-Alex: ref/p0 = {d0:.6}, ref/p1 = {d1:.6}");
+    assert!((d0 - 0.722).abs() < 5e-4, "ref vs p0: {d0}");
+    assert!(
+        (d1 - 0.137).abs() < 1e-3 && (d1 - 0.138).abs() < 1e-3,
+        "ref vs p1: {d1}"
+    );
+    assert!(
+        dist(&m, &r, &r).abs() < 1e-6,
+        "identical images must give 0"
+    );
+}
+
+#[test]
+fn vgg_matches_published_pytorch_values() {
+    let (Some(m), Some([r, p0, p1])) = (model(LpipsNet::Vgg), images()) else {
+        return;
+    };
+    let d0 = dist(&m, &r, &p0);
+    let d1 = dist(&m, &r, &p1);
+    eprintln!("LPIPS-VGG: ref/p0 = {d0:.6}, ref/p1 = {d1:.6}");
+    // The official PyTorch LPIPS-VGG values quoted by alexlee-gk/lpips-tensorflow's test:
+    // ex_ref/ex_p0 = 0.569, ex_ref/ex_p1 = 0.422.
+    assert!((d0 - 0.569).abs() < 5e-4, "ref vs p0: {d0}");
+    assert!((d1 - 0.422).abs() < 5e-4, "ref vs p1: {d1}");
+    assert!(dist(&m, &r, &r).abs() < 1e-6);
+}
+
+#[test]
+fn small_images_are_rejected_with_an_error() {
+    let Some(m) = model(LpipsNet::Alex) else {
+        return;
+    };
+    let img = vec![0.5f32; 20 * 40 * 3];
+    let err = m.distance(&img, &img, 20, 40).unwrap_err();
+    assert!(err.to_string().contains("smaller than the 31 px"), "{err}");
+}
+
+#[test]
+fn missing_weights_name_the_path() {
+    let err = Lpips::load(
+        LpipsNet::Alex,
+        std::path::Path::new("/nonexistent/x.safetensors"),
+    )
+    .err()
+    .unwrap();
+    assert!(
+        err.to_string().contains("/nonexistent/x.safetensors"),
+        "{err}"
+    );
+}

@@ -1,0 +1,27 @@
+//! `scene`: cameras, data sets and their files (DESIGN.md, "Data sets").
+//!
+//! - [`load_dataset`] reads D-NeRF/Blender (`transforms_*.json`) and Nerfies/HyperNeRF
+//!   (`dataset.json`) scenes into a [`Dataset`] of [`Frame`]s with [`splat::Camera`]s in the
+//!   project's conventions (OpenCV axes, world→camera) and u8 images.
+//! - [`ImageU8`] / [`MaskU8`]: 8-bit RGB images and object-ID maps (255 = background),
+//!   read and written as PNG (writes are atomic).
+//! - [`objects`]: the `objects.json` ground truth of the toycars scenes.
+//! - [`toycars`]: the procedural rebuild of the paper's experiment (issue 3).
+
+mod dataset;
+mod dnerf;
+mod error;
+mod image;
+pub mod io;
+pub mod math;
+mod nerfies;
+pub mod objects;
+mod ply;
+pub mod toycars;
+
+pub use crate::image::{load_mask, save_mask, save_rgba_png, ImageU8, MaskU8, MASK_BACKGROUND};
+pub use dataset::{
+    load_dataset, mask_path, semantics_path, Dataset, DatasetKind, Frame, LoadOptions,
+};
+pub use error::SceneError;
+pub use ply::read_points as read_ply_points;

@@ -1,0 +1,90 @@
+//! `objects.json`: the ground truth of the toycars scenes (issue 3) — each object's
+//! name, text prompt, whether it moves, its local bounding box, and per frame the 4×4
+//! row-major matrix taking its local coordinates to world coordinates.
+
+use crate::SceneError;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjectsFile {
+    pub objects: Vec<ObjectInfo>,
+    /// Every frame of every split.
+    pub frames: Vec<ObjectFrame>,
+    /// Other top-level keys (e.g. the generator's settings), kept as they are.
+    #[serde(flatten)]
+    pub extra: serde_json::Map<String, serde_json::Value>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjectInfo {
+    /// The value of the object's pixels in the instance masks.
+    pub id: u8,
+    pub name: String,
+    /// Text prompt for the semantic dictionary.
+    pub prompt: String,
+    pub moving: bool,
+    /// `[[xmin, ymin, zmin], [xmax, ymax, zmax]]` in object-local coordinates.
+    pub bbox_local: [[f32; 3]; 2],
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjectFrame {
+    /// Same key as [`crate::Frame::file_path`] (e.g. `train/r_000`).
+    pub file_path: String,
+    pub time: f32,
+    /// One row-major 4×4 local-to-world matrix per object, in `objects` order.
+    pub object_to_world: Vec<[[f32; 4]; 4]>,
+}
+
+impl ObjectsFile {
+    /// Reads and checks `objects.json` (one finite matrix per object in every frame).
+    pub fn load(path: &Path) -> Result<Self, SceneError> {
+        let f: Self = crate::io::read_json(path)?;
+        for (i, fr) in f.frames.iter().enumerate() {
+            if fr.object_to_world.len() != f.objects.len() {
+                return Err(SceneError::invalid(
+                    path,
+                    format!(
+                        "frame {i} has {} matrices for {} objects",
+                        fr.object_to_world.len(),
+                        f.objects.len()
+                    ),
+                ));
+            }
+            if fr
+                .object_to_world
+                .iter()
+                .flatten()
+                .flatten()
+                .any(|v| !v.is_finite())
+                || !fr.time.is_finite()
+            {
+                return Err(SceneError::invalid(
+                    path,
+                    format!("frame {i} has a non-finite value"),
+                ));
+            }
+        }
+        Ok(f)
+    }
+
+    /// Writes pretty JSON atomically.
+    pub fn save(&self, path: &Path) -> Result<(), SceneError> {
+        crate::io::write_json(path, self)
+    }
+
+    /// The frame with this `file_path`, if any.
+    pub fn frame(&self, file_path: &str) -> Option<&ObjectFrame> {
+        self.frames.iter().find(|f| f.file_path == file_path)
+    }
+}
+
+/// `m · [p, 1]` for a row-major 4×4 (affine part).
+pub fn apply(m: &[[f32; 4]; 4], p: [f32; 3]) -> [f32; 3] {
+    let mut out = [0.0f32; 3];
+    for (r, o) in out.iter_mut().enumerate() {
+        *o = m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2] + m[r][3];
+    }
+    out
+}

@@ -1,0 +1,152 @@
+//! Where things are at time t ∈ [0, 1] (6 s): the vehicles' poses (two parked, one
+//! driving a curve with a left turn) and the camera sliding along an arc.
+//!
+//! Scale: everything stays inside [−1.3, 1.3]³ (the ground mat is [−1.25, 1.25]² at z = 0),
+//! where the trainer seeds its random initial points as Deformable-3DGS does for
+//! synthetic scenes. The moving vehicle covers ~2.6 units while the camera's centre moves
+//! ~1.05 units along a 30° arc, and the camera keeps looking at the same spot: the
+//! monocular setting in which deformable 3DGS struggles (paper, Sec. 1 and 4).
+
+use super::geometry::{normalize, sub, V3};
+use super::vehicles::{green_suv, white_suv, yellow_sedan, Vehicle};
+use super::Preset;
+
+/// Half side of the square ground mat.
+pub const GROUND_HALF: f32 = 1.25;
+
+/// The three vehicles in mask-ID order (0 white SUV, 1 yellow sedan, 2 green SUV) and
+/// which one moves.
+pub struct Layout {
+    pub vehicles: Vec<Vehicle>,
+    pub moving: usize,
+}
+
+impl Layout {
+    pub fn new(preset: Preset) -> Self {
+        let moving = match preset {
+            Preset::Scene1 => 0,
+            Preset::Scene2 => 1,
+        };
+        Self {
+            vehicles: vec![white_suv(), yellow_sedan(), green_suv()],
+            moving,
+        }
+    }
+
+    /// `(x, y, yaw)` of vehicle `i` at time `t`: the moving one follows [`path`], the others
+    /// take the two parking spots in ID order.
+    pub fn pose(&self, i: usize, t: f32) -> (f32, f32, f32) {
+        if i == self.moving {
+            return path(t);
+        }
+        const SPOTS: [(f32, f32, f32); 2] = [(-0.15, 0.12, 0.35), (-0.62, 0.62, -1.05)];
+        let slot = (0..i).filter(|&k| k != self.moving).count();
+        SPOTS[slot]
+    }
+}
+
+/// Cubic Bézier control points of the drive: along the near side heading +x, then a left
+/// turn of ~95° up the right side.
+const CONTROL: [[f32; 2]; 4] = [[-0.9, -0.55], [0.25, -0.8], [0.8, -0.45], [0.72, 0.72]];
+
+fn bezier(s: f32) -> ([f32; 2], [f32; 2]) {
+    let u = 1.0 - s;
+    let w = [u * u * u, 3.0 * u * u * s, 3.0 * u * s * s, s * s * s];
+    let dw = [
+        -3.0 * u * u,
+        3.0 * u * u - 6.0 * u * s,
+        6.0 * u * s - 3.0 * s * s,
+        3.0 * s * s,
+    ];
+    let mut p = [0.0; 2];
+    let mut d = [0.0; 2];
+    for k in 0..4 {
+        for c in 0..2 {
+            p[c] += w[k] * CONTROL[k][c];
+            d[c] += dw[k] * CONTROL[k][c];
+        }
+    }
+    (p, d)
+}
+
+/// Pose on the drive at time `t`: constant speed along the curve (arc length inverted
+/// from a 512-segment table), heading along the tangent.
+pub fn path(t: f32) -> (f32, f32, f32) {
+    const N: usize = 512;
+    let mut cum = [0.0f32; N + 1];
+    let mut prev = bezier(0.0).0;
+    for (i, c) in cum.iter_mut().enumerate().skip(1) {
+        let p = bezier(i as f32 / N as f32).0;
+        *c = (p[0] - prev[0]).hypot(p[1] - prev[1]);
+        prev = p;
+    }
+    for i in 1..=N {
+        cum[i] += cum[i - 1];
+    }
+    let target = t.clamp(0.0, 1.0) * cum[N];
+    let i = cum.partition_point(|&c| c < target).clamp(1, N);
+    let f = (target - cum[i - 1]) / (cum[i] - cum[i - 1]).max(1e-12);
+    let s = (i as f32 - 1.0 + f) / N as f32;
+    let (p, d) = bezier(s);
+    (p[0], p[1], d[1].atan2(d[0]))
+}
+
+/// Horizontal field of view written as `camera_angle_x`.
+pub const CAMERA_ANGLE_X: f32 = 0.95;
+
+/// Camera centre and the world→camera rotation rows (right, down, forward; OpenCV) at `t`:
+/// 2.7 units from a target above the mat's centre, 42° above the horizon, azimuth
+/// sweeping 30° from the near-left.
+pub fn camera_pose(t: f32) -> (V3, [V3; 3]) {
+    let target = [-0.02, -0.05, 0.08];
+    let (r, elev) = (2.7f32, 42f32.to_radians());
+    let az = (-112.0 + 30.0 * t).to_radians();
+    let c = [
+        target[0] + r * elev.cos() * az.cos(),
+        target[1] + r * elev.cos() * az.sin(),
+        target[2] + r * elev.sin(),
+    ];
+    let f = normalize(sub(target, c));
+    let right = normalize([f[1], -f[0], 0.0]); // f × z
+    let down = [
+        f[1] * right[2] - f[2] * right[1],
+        f[2] * right[0] - f[0] * right[2],
+        f[0] * right[1] - f[1] * right[0],
+    ];
+    (c, [right, down, f])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn path_has_constant_speed_and_turns_left() {
+        let steps: Vec<(f32, f32, f32)> = (0..=20).map(|i| path(i as f32 / 20.0)).collect();
+        let d: Vec<f32> = steps
+            .windows(2)
+            .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
+            .collect();
+        let (lo, hi) = d
+            .iter()
+            .fold((f32::MAX, 0.0f32), |(a, b), &x| (a.min(x), b.max(x)));
+        assert!(hi / lo < 1.05, "{d:?}");
+        assert!(d.iter().sum::<f32>() > 1.8);
+        let turn = steps[20].2 - steps[0].2;
+        assert!(turn > 1.2, "turn {turn}");
+    }
+
+    #[test]
+    fn camera_rotation_is_orthonormal_and_right_handed() {
+        let (_, r) = camera_pose(0.3);
+        let cross = [
+            r[0][1] * r[1][2] - r[0][2] * r[1][1],
+            r[0][2] * r[1][0] - r[0][0] * r[1][2],
+            r[0][0] * r[1][1] - r[0][1] * r[1][0],
+        ];
+        for k in 0..3 {
+            assert!((cross[k] - r[2][k]).abs() < 1e-5);
+        }
+        assert!(r[1][2] < 0.0, "image down must point to world −z");
+    }
+}

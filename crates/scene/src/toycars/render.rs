@@ -1,0 +1,270 @@
+//! The toycars ray caster: primary rays against the ground mat and the posed vehicles,
+//! Lambert + Blinn-Phong shading under one sun with hard shadows, 4 rotated-grid
+//! supersamples per pixel, rows in parallel (rayon).
+
+use super::geometry::{add, dot, hit_box, hit_wheel, normalize, overlaps_box, scale, sub, Ray, V3};
+use super::motion::GROUND_HALF;
+use super::texture;
+use super::vehicles::{albedo, Material, Shape, Vehicle};
+use crate::MASK_BACKGROUND;
+use rayon::prelude::*;
+
+/// Rotated-grid 4× pattern (offsets from the pixel centre): no two samples share a row
+/// or column, which resolves near-horizontal and near-vertical edges best for 4 rays.
+const RGSS: [[f32; 2]; 4] = [
+    [0.125, -0.375],
+    [0.375, 0.125],
+    [-0.125, 0.375],
+    [-0.375, -0.125],
+];
+
+/// A vehicle placed in the world at one instant: yaw about z, then translation.
+pub struct Placed<'a> {
+    pub vehicle: &'a Vehicle,
+    pub id: u8,
+    pub cos: f32,
+    pub sin: f32,
+    pub pos: [f32; 2],
+}
+
+impl Placed<'_> {
+    fn to_local(&self, r: &Ray) -> Ray {
+        let (x, y) = (r.origin[0] - self.pos[0], r.origin[1] - self.pos[1]);
+        let rot = |a: f32, b: f32| [self.cos * a + self.sin * b, -self.sin * a + self.cos * b];
+        let o = rot(x, y);
+        let d = rot(r.dir[0], r.dir[1]);
+        Ray {
+            origin: [o[0], o[1], r.origin[2]],
+            dir: [d[0], d[1], r.dir[2]],
+        }
+    }
+
+    fn normal_to_world(&self, n: V3) -> V3 {
+        [
+            self.cos * n[0] - self.sin * n[1],
+            self.sin * n[0] + self.cos * n[1],
+            n[2],
+        ]
+    }
+}
+
+/// Everything a frame needs besides the camera.
+pub struct World<'a> {
+    pub objects: Vec<Placed<'a>>,
+    pub ground_key: u64,
+    pub paint_key: u64,
+    pub sun: V3,
+    pub shadows: bool,
+}
+
+struct Hit {
+    t: f32,
+    id: u8,
+    normal: V3,
+    color: V3,
+    spec: f32,
+}
+
+/// Nearest part of one vehicle hit by a local-frame ray: `(t, normal, part index)`.
+fn hit_vehicle(v: &Vehicle, r: &Ray, t_max: f32) -> Option<(f32, V3, usize)> {
+    if !overlaps_box(r, v.bbox_lo, v.bbox_hi, 1e-4, t_max) {
+        return None;
+    }
+    let mut best: Option<(f32, V3, usize)> = None;
+    for (i, part) in v.parts.iter().enumerate() {
+        let limit = best.map_or(t_max, |b| b.0);
+        let h = match part.shape {
+            Shape::Box { lo, hi } => hit_box(r, lo, hi, 1e-4, limit),
+            Shape::Wheel {
+                center,
+                radius,
+                half_w,
+            } => hit_wheel(r, center, radius, half_w, 1e-4, limit),
+        };
+        if let Some((t, n)) = h {
+            best = Some((t, n, i));
+        }
+    }
+    best
+}
+
+impl World<'_> {
+    fn trace(&self, ray: &Ray) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        let mut t_max = f32::MAX;
+        for obj in &self.objects {
+            let local = obj.to_local(ray);
+            if let Some((t, n, i)) = hit_vehicle(obj.vehicle, &local, t_max) {
+                t_max = t;
+                let part = &obj.vehicle.parts[i];
+                let mut p = local.at(t);
+                if let (Material::Tire, Shape::Wheel { center, .. }) = (part.material, part.shape) {
+                    p = sub(p, center);
+                }
+                let (color, spec) = albedo(&part.material, p, n, self.paint_key);
+                best = Some(Hit {
+                    t,
+                    id: obj.id,
+                    normal: obj.normal_to_world(n),
+                    color,
+                    spec,
+                });
+            }
+        }
+        if ray.dir[2] < 0.0 {
+            let t = -ray.origin[2] / ray.dir[2];
+            let p = ray.at(t);
+            if t < t_max && p[0].abs() <= GROUND_HALF && p[1].abs() <= GROUND_HALF {
+                let color = texture::ground(self.ground_key, p[0], p[1]);
+                best = Some(Hit {
+                    t,
+                    id: MASK_BACKGROUND,
+                    normal: [0.0, 0.0, 1.0],
+                    color,
+                    spec: 0.04,
+                });
+            }
+        }
+        best
+    }
+
+    fn in_shadow(&self, p: V3) -> bool {
+        let ray = Ray {
+            origin: p,
+            dir: self.sun,
+        };
+        self.objects
+            .iter()
+            .any(|o| hit_vehicle(o.vehicle, &o.to_local(&ray), f32::MAX).is_some())
+    }
+
+    /// Colour of a hit seen along `dir`.
+    fn shade(&self, ray: &Ray, h: &Hit) -> V3 {
+        let p = add(ray.at(h.t), scale(h.normal, 1e-3));
+        let ndl = dot(h.normal, self.sun).max(0.0);
+        let lit = if ndl > 0.0 && !(self.shadows && self.in_shadow(p)) {
+            1.0
+        } else {
+            0.0
+        };
+        let half = normalize(sub(self.sun, ray.dir));
+        let spec = h.spec * dot(h.normal, half).max(0.0).powi(48) * lit;
+        let sky = 0.30 + 0.12 * h.normal[2];
+        let k = sky + 0.78 * ndl * lit;
+        [
+            h.color[0] * k + spec,
+            h.color[1] * k + spec,
+            h.color[2] * k + spec,
+        ]
+    }
+}
+
+/// Pinhole camera for ray generation: centre, rotation rows (right, down, forward), intrinsics.
+pub struct RayCamera {
+    pub center: V3,
+    pub rows: [V3; 3],
+    pub fx: f32,
+    pub fy: f32,
+    pub cx: f32,
+    pub cy: f32,
+}
+
+impl RayCamera {
+    fn ray(&self, u: f32, v: f32) -> Ray {
+        let (x, y) = ((u - self.cx) / self.fx, (v - self.cy) / self.fy);
+        let r = &self.rows;
+        let d = [0, 1, 2].map(|k| r[0][k] * x + r[1][k] * y + r[2][k]);
+        Ray {
+            origin: self.center,
+            dir: normalize(d),
+        }
+    }
+}
+
+/// Renders straight-alpha RGBA (`H·W·4`, alpha = sample coverage) and the instance mask
+/// (`H·W`, majority vote over the samples, ties to the smaller ID).
+pub fn render(
+    world: &World,
+    cam: &RayCamera,
+    width: u32,
+    height: u32,
+    supersample: bool,
+) -> (Vec<u8>, Vec<u8>) {
+    let (w, h) = (width as usize, height as usize);
+    let mut rgba = vec![0u8; w * h * 4];
+    let mut mask = vec![MASK_BACKGROUND; w * h];
+    let offsets: &[[f32; 2]] = if supersample { &RGSS } else { &[[0.0, 0.0]] };
+    rgba.par_chunks_mut(w * 4)
+        .zip(mask.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(row, (out, ids))| {
+            for col in 0..w {
+                let (px, id) =
+                    render_pixel(world, cam, col as f32 + 0.5, row as f32 + 0.5, offsets);
+                out[col * 4..col * 4 + 4].copy_from_slice(&px);
+                ids[col] = id;
+            }
+        });
+    (rgba, mask)
+}
+
+fn render_pixel(
+    world: &World,
+    cam: &RayCamera,
+    u: f32,
+    v: f32,
+    offsets: &[[f32; 2]],
+) -> ([u8; 4], u8) {
+    let mut sum = [0.0f32; 3];
+    let mut hits = 0usize;
+    let mut ids = [MASK_BACKGROUND; 4];
+    for (k, o) in offsets.iter().enumerate() {
+        let ray = cam.ray(u + o[0], v + o[1]);
+        if let Some(h) = world.trace(&ray) {
+            let c = world.shade(&ray, &h);
+            for ch in 0..3 {
+                sum[ch] += c[ch].min(1.0);
+            }
+            hits += 1;
+            ids[k] = h.id;
+        }
+    }
+    let n = offsets.len();
+    let q = |x: f32| (x * 255.0 + 0.5) as u8;
+    let px = if hits == 0 {
+        [0; 4]
+    } else {
+        let inv = 1.0 / hits as f32;
+        [
+            q(sum[0] * inv),
+            q(sum[1] * inv),
+            q(sum[2] * inv),
+            q(hits as f32 / n as f32),
+        ]
+    };
+    (px, majority(&ids[..n]))
+}
+
+/// Most frequent ID; ties go to the smaller value (vehicles before background).
+fn majority(ids: &[u8]) -> u8 {
+    let mut best = (0usize, MASK_BACKGROUND);
+    for &a in ids {
+        let c = ids.iter().filter(|&&b| b == a).count();
+        if c > best.0 || (c == best.0 && a < best.1) {
+            best = (c, a);
+        }
+    }
+    best.1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::majority;
+
+    #[test]
+    fn majority_prefers_objects_on_ties() {
+        assert_eq!(majority(&[255, 1, 1, 255]), 1);
+        assert_eq!(majority(&[255, 255, 255, 2]), 255);
+        assert_eq!(majority(&[0, 2, 2, 0]), 0);
+    }
+}

@@ -1,0 +1,184 @@
+//! Writing a toycars scene: per-frame RGBA image and mask, then `transforms_*.json`
+//! (D-NeRF: camera-to-world in OpenGL axes) and `objects.json`.
+
+use super::motion::{camera_pose, Layout, CAMERA_ANGLE_X};
+use super::render::{render, Placed, RayCamera, World};
+use super::{frame_key, ToycarsConfig};
+use crate::objects::{ObjectFrame, ObjectInfo, ObjectsFile};
+use crate::{mask_path, save_mask, save_rgba_png, MaskU8, SceneError};
+use serde_json::json;
+use std::path::Path;
+
+/// What the metadata files need to know about one written frame.
+pub struct FrameRecord {
+    index: usize,
+    time: f32,
+    object_to_world: Vec<[[f32; 4]; 4]>,
+}
+
+fn focal(width: u32) -> f32 {
+    0.5 * width as f32 / (0.5 * CAMERA_ANGLE_X).tan()
+}
+
+/// The frame's camera in the project's conventions (world→camera, OpenCV axes).
+pub fn splat_camera(width: u32, height: u32, t: f32) -> splat::Camera {
+    let (c, r) = camera_pose(t);
+    let mut viewmat = [[0.0f32; 4]; 4];
+    for k in 0..3 {
+        viewmat[k][..3].copy_from_slice(&r[k]);
+        viewmat[k][3] = -(r[k][0] * c[0] + r[k][1] * c[1] + r[k][2] * c[2]);
+    }
+    viewmat[3][3] = 1.0;
+    let f = focal(width);
+    splat::Camera {
+        width,
+        height,
+        fx: f,
+        fy: f,
+        cx: 0.5 * width as f32,
+        cy: 0.5 * height as f32,
+        viewmat,
+    }
+}
+
+/// Row-major local→world matrix of a `(x, y, yaw)` pose.
+fn pose_matrix((x, y, yaw): (f32, f32, f32)) -> [[f32; 4]; 4] {
+    let (s, c) = yaw.sin_cos();
+    [
+        [c, -s, 0.0, x],
+        [s, c, 0.0, y],
+        [0.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ]
+}
+
+pub fn render_frame(
+    cfg: &ToycarsConfig,
+    layout: &Layout,
+    keys: (u64, u64),
+    t: f32,
+    out_dir: &Path,
+    index: usize,
+) -> Result<FrameRecord, SceneError> {
+    let poses: Vec<(f32, f32, f32)> = (0..layout.vehicles.len())
+        .map(|i| layout.pose(i, t))
+        .collect();
+    let objects = layout
+        .vehicles
+        .iter()
+        .zip(&poses)
+        .enumerate()
+        .map(|(i, (v, p))| Placed {
+            vehicle: v,
+            id: i as u8,
+            cos: p.2.cos(),
+            sin: p.2.sin(),
+            pos: [p.0, p.1],
+        })
+        .collect();
+    let sun = super::geometry::normalize([0.45, -0.55, 0.85]);
+    let world = World {
+        objects,
+        ground_key: keys.0,
+        paint_key: keys.1,
+        sun,
+        shadows: cfg.shadows,
+    };
+    let (center, rows) = camera_pose(t);
+    let f = focal(cfg.width);
+    let cam = RayCamera {
+        center,
+        rows,
+        fx: f,
+        fy: f,
+        cx: 0.5 * cfg.width as f32,
+        cy: 0.5 * cfg.height as f32,
+    };
+    let (rgba, ids) = render(&world, &cam, cfg.width, cfg.height, cfg.supersample);
+    let (_, key) = frame_key(index);
+    save_rgba_png(
+        &out_dir.join(format!("{key}.png")),
+        cfg.width,
+        cfg.height,
+        &rgba,
+    )?;
+    let mask = MaskU8 {
+        width: cfg.width,
+        height: cfg.height,
+        data: ids,
+    };
+    save_mask(&mask_path(out_dir, &key), &mask)?;
+    Ok(FrameRecord {
+        index,
+        time: t,
+        object_to_world: poses.into_iter().map(pose_matrix).collect(),
+    })
+}
+
+/// Camera-to-world in OpenGL axes (D-NeRF `transform_matrix`): the inverse of the
+/// world→camera rotation, with the camera y and z columns negated.
+fn transform_matrix(t: f32) -> [[f32; 4]; 4] {
+    let (c, r) = camera_pose(t);
+    let mut m = [[0.0f32; 4]; 4];
+    for i in 0..3 {
+        m[i] = [r[0][i], -r[1][i], -r[2][i], c[i]];
+    }
+    m[3][3] = 1.0;
+    m
+}
+
+pub fn write_metadata(
+    cfg: &ToycarsConfig,
+    layout: &Layout,
+    frames: &[FrameRecord],
+    out: &Path,
+) -> Result<(), SceneError> {
+    let f = focal(cfg.width);
+    for split in ["train", "val", "test"] {
+        let list: Vec<_> = frames
+            .iter()
+            .filter(|fr| frame_key(fr.index).0 == split)
+            .map(|fr| json!({"file_path": format!("./{}", frame_key(fr.index).1), "time": fr.time, "transform_matrix": transform_matrix(fr.time)}))
+            .collect();
+        let doc = json!({
+            "camera_angle_x": CAMERA_ANGLE_X,
+            "fl_x": f, "fl_y": f, "cx": 0.5 * cfg.width as f32, "cy": 0.5 * cfg.height as f32,
+            "w": cfg.width, "h": cfg.height,
+            "frames": list,
+        });
+        crate::io::write_json(&out.join(format!("transforms_{split}.json")), &doc)?;
+    }
+    let objects = layout
+        .vehicles
+        .iter()
+        .enumerate()
+        .map(|(i, v)| ObjectInfo {
+            id: i as u8,
+            name: v.name.to_string(),
+            prompt: v.prompt.to_string(),
+            moving: i == layout.moving,
+            bbox_local: [v.bbox_lo, v.bbox_hi],
+        })
+        .collect();
+    let frames = frames
+        .iter()
+        .map(|fr| ObjectFrame {
+            file_path: frame_key(fr.index).1,
+            time: fr.time,
+            object_to_world: fr.object_to_world.clone(),
+        })
+        .collect();
+    let mut extra = serde_json::Map::new();
+    extra.insert(
+        "generator".into(),
+        json!({"name": "semdynreg synth toycars", "preset": cfg.preset.name(), "seed": cfg.seed,
+               "width": cfg.width, "height": cfg.height, "frames": cfg.frames, "duration_s": 6.0,
+               "mask_background": crate::MASK_BACKGROUND, "up_axis": "+z"}),
+    );
+    ObjectsFile {
+        objects,
+        frames,
+        extra,
+    }
+    .save(&out.join("objects.json"))
+}

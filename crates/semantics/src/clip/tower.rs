@@ -1,0 +1,134 @@
+//! The pre-norm residual transformer shared by both CLIP towers: OpenCLIP's
+//! `ResidualAttentionBlock` (`x + attn(ln_1(x))`, then `x + mlp(ln_2(x))`) with PyTorch's
+//! `nn.MultiheadAttention` (packed `in_proj`, scale `1/√head_dim` on the queries).
+
+use candle_core::{Module, Tensor, D};
+use candle_nn::{LayerNorm, Linear};
+
+use super::config::Activation;
+use super::weights::Weights;
+use super::ClipError;
+
+/// PyTorch `nn.LayerNorm`'s default epsilon, used by every CLIP checkpoint.
+const LN_EPS: f64 = 1e-5;
+
+/// `nn.LayerNorm(width)` named `prefix`.
+pub fn layer_norm(w: &Weights, prefix: &str, width: usize) -> Result<LayerNorm, ClipError> {
+    Ok(LayerNorm::new(
+        w.get(&format!("{prefix}.weight"), &[width])?,
+        w.get(&format!("{prefix}.bias"), &[width])?,
+        LN_EPS,
+    ))
+}
+
+fn linear(w: &Weights, prefix: &str, out: usize, inp: usize) -> Result<Linear, ClipError> {
+    Ok(Linear::new(
+        w.get(&format!("{prefix}.weight"), &[out, inp])?,
+        Some(w.get(&format!("{prefix}.bias"), &[out])?),
+    ))
+}
+
+struct Block {
+    ln_1: LayerNorm,
+    in_proj: Linear,
+    out_proj: Linear,
+    ln_2: LayerNorm,
+    c_fc: Linear,
+    c_proj: Linear,
+}
+
+/// A stack of residual attention blocks.
+pub struct Transformer {
+    blocks: Vec<Block>,
+    width: usize,
+    heads: usize,
+    activation: Activation,
+}
+
+impl Transformer {
+    /// Reads `{prefix}.resblocks.{0..layers}`.
+    pub fn load(
+        w: &Weights,
+        prefix: &str,
+        (width, layers, heads, mlp_width): (usize, usize, usize, usize),
+        activation: Activation,
+    ) -> Result<Self, ClipError> {
+        if heads == 0 || width % heads != 0 {
+            return Err(ClipError::Layout {
+                path: w.path.clone(),
+                reason: format!("{prefix}: width {width} is not divisible by {heads} heads"),
+            });
+        }
+        let blocks = (0..layers)
+            .map(|i| {
+                let p = format!("{prefix}.resblocks.{i}");
+                Ok(Block {
+                    ln_1: layer_norm(w, &format!("{p}.ln_1"), width)?,
+                    in_proj: Linear::new(
+                        w.get(&format!("{p}.attn.in_proj_weight"), &[3 * width, width])?,
+                        Some(w.get(&format!("{p}.attn.in_proj_bias"), &[3 * width])?),
+                    ),
+                    out_proj: linear(w, &format!("{p}.attn.out_proj"), width, width)?,
+                    ln_2: layer_norm(w, &format!("{p}.ln_2"), width)?,
+                    c_fc: linear(w, &format!("{p}.mlp.c_fc"), mlp_width, width)?,
+                    c_proj: linear(w, &format!("{p}.mlp.c_proj"), width, mlp_width)?,
+                })
+            })
+            .collect::<Result<_, ClipError>>()?;
+        Ok(Self {
+            blocks,
+            width,
+            heads,
+            activation,
+        })
+    }
+
+    /// `x`: `(batch, tokens, width)`; `mask`: additive `(tokens, tokens)` (causal for text).
+    pub fn forward(&self, x: &Tensor, mask: Option<&Tensor>) -> Result<Tensor, ClipError> {
+        let mut x = x.clone();
+        for b in &self.blocks {
+            x = (&x + self.attention(b, &b.ln_1.forward(&x)?, mask)?)?;
+            let h = b.c_fc.forward(&b.ln_2.forward(&x)?)?;
+            let h = match self.activation {
+                Activation::Gelu => h.gelu_erf()?,
+                Activation::QuickGelu => (&h * candle_nn::ops::sigmoid(&(&h * 1.702)?)?)?,
+            };
+            x = (x + b.c_proj.forward(&h)?)?;
+        }
+        Ok(x)
+    }
+
+    fn attention(&self, b: &Block, x: &Tensor, mask: Option<&Tensor>) -> Result<Tensor, ClipError> {
+        let (batch, tokens, _) = x.dims3()?;
+        let head_dim = self.width / self.heads;
+        let qkv = b
+            .in_proj
+            .forward(x)?
+            .reshape((batch, tokens, 3, self.heads, head_dim))?;
+        // (3, batch, heads, tokens, head_dim)
+        let qkv = qkv.permute((2, 0, 3, 1, 4))?;
+        let q = (qkv.get(0)?.contiguous()? * (head_dim as f64).powf(-0.5))?;
+        let k = qkv.get(1)?.contiguous()?;
+        let v = qkv.get(2)?.contiguous()?;
+        let mut scores = q.matmul(&k.t()?)?;
+        if let Some(m) = mask {
+            scores = scores.broadcast_add(m)?;
+        }
+        let attn = candle_nn::ops::softmax_last_dim(&scores)?;
+        let out = attn
+            .matmul(&v)?
+            .transpose(1, 2)?
+            .reshape((batch, tokens, self.width))?;
+        Ok(b.out_proj.forward(&out)?)
+    }
+}
+
+/// `x / ‖x‖₂` along the last dimension (`F.normalize`, eps 1e-12).
+pub fn l2_normalize(x: &Tensor) -> Result<Tensor, ClipError> {
+    let norm = x
+        .sqr()?
+        .sum_keepdim(D::Minus1)?
+        .sqrt()?
+        .clamp(1e-12, f64::INFINITY)?;
+    Ok(x.broadcast_div(&norm)?)
+}

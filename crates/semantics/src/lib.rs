@@ -1,0 +1,7 @@
+//! `semantics` (see DESIGN.md).
+pub mod automask;
+pub mod clip;
+pub mod idmap;
+pub mod relevance;
+pub mod sam;
+pub mod segment;

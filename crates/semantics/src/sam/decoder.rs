@@ -1,0 +1,404 @@
+//! SAM's mask decoder (`segment_anything/modeling/mask_decoder.py` + the two-way transformer),
+//! rewritten on plain f32 buffers for batched automatic-mask generation on a CPU.
+//!
+//! Per image, everything that does not depend on the prompt is computed once
+//! ([`MaskDecoder::prepare`]): the image tokens plus the "no mask" embedding, their positional
+//! sum, and the first block's image-side key / value / query projections (the image tokens only
+//! change after the first block's image-to-token attention). Per prompt ([`MaskDecoder::decode`])
+//! only the folded attention products remain (see `layers.rs`), and the output upscaling runs
+//! only when a mask can pass the predicted-IoU filter — the IoU head reads the transformer's
+//! IoU token, which is ready before any upscaling — and only over the embedding cells that the
+//! un-padded image covers (the upscaling is pixel-local: 2×2 stride-2 transposed convolutions,
+//! a per-pixel LayerNorm and GELUs). Both shortcuts are exact.
+
+use candle_nn::VarBuilder;
+
+use super::kernels::{add_assign, add_into, gelu_inplace, matmul, relu_inplace};
+use super::layers::{get_vec, Attention, Linear, Norm};
+use super::prompt::{EMBED_DIM, GRID};
+
+const HEADS: usize = 8;
+const MLP_DIM: usize = 2048;
+const NUM_MASK_TOKENS: usize = 4;
+const UP1: usize = EMBED_DIM / 4;
+const UP2: usize = EMBED_DIM / 8;
+/// Tokens per prompt: IoU token, 4 mask tokens, the point and the padding point.
+pub const N_TOKENS: usize = 1 + NUM_MASK_TOKENS + 2;
+/// Side of the low-resolution mask grid (4× the embedding grid).
+pub const LOW_RES: usize = 4 * GRID;
+
+#[derive(Debug, Clone)]
+struct Block {
+    self_attn: Attention,
+    norm1: Norm,
+    t2i: Attention,
+    norm2: Norm,
+    lin1: Linear,
+    lin2: Linear,
+    norm3: Norm,
+    norm4: Norm,
+    i2t: Attention,
+}
+
+impl Block {
+    fn load(vb: &VarBuilder) -> candle_core::Result<Self> {
+        Ok(Self {
+            self_attn: Attention::load(&vb.pp("self_attn"), EMBED_DIM, HEADS, 1)?,
+            norm1: Norm::load(&vb.pp("norm1"), EMBED_DIM, 1e-5)?,
+            t2i: Attention::load(&vb.pp("cross_attn_token_to_image"), EMBED_DIM, HEADS, 2)?,
+            norm2: Norm::load(&vb.pp("norm2"), EMBED_DIM, 1e-5)?,
+            lin1: Linear::load(&vb.pp("mlp.lin1"), EMBED_DIM, MLP_DIM)?,
+            lin2: Linear::load(&vb.pp("mlp.lin2"), MLP_DIM, EMBED_DIM)?,
+            norm3: Norm::load(&vb.pp("norm3"), EMBED_DIM, 1e-5)?,
+            norm4: Norm::load(&vb.pp("norm4"), EMBED_DIM, 1e-5)?,
+            i2t: Attention::load(&vb.pp("cross_attn_image_to_token"), EMBED_DIM, HEADS, 2)?,
+        })
+    }
+
+    /// Token-side MLP with residual and norm3.
+    fn mlp(&self, queries: &mut [f32]) {
+        let mut h = self.lin1.forward(queries, N_TOKENS);
+        relu_inplace(&mut h);
+        add_assign(queries, &self.lin2.forward(&h, N_TOKENS));
+        self.norm3.apply(queries);
+    }
+}
+
+/// Prompt-independent decoder state for one image embedding.
+#[derive(Debug, Clone)]
+pub struct ImageContext {
+    /// Image tokens + no-mask embedding (4096×256).
+    keys0: Vec<f32>,
+    /// Dense positional encoding (4096×256).
+    pe: Vec<f32>,
+    /// First block, token-to-image keys and values (4096×128 each).
+    k0: Vec<f32>,
+    v0: Vec<f32>,
+    /// First block, image-to-token queries (4096×128).
+    q0: Vec<f32>,
+}
+
+/// Reusable per-thread buffers (each 4096×256 or smaller), so decoding allocates no large
+/// blocks per prompt.
+#[derive(Debug, Default)]
+pub struct Scratch {
+    keys: Vec<f32>,
+    keys_pe: Vec<f32>,
+    attn: Vec<f32>,
+    s: Vec<f32>,
+}
+
+/// Decoder output for one point prompt (SAM's three multimask outputs).
+#[derive(Debug, Clone)]
+pub struct PromptMasks {
+    pub iou_pred: [f32; 3],
+    /// Low-resolution mask logits, 3 × `rows` × `cols`, covering the top-left `rows`×`cols`
+    /// of the 256×256 padded low-res frame; `None` when no output passed the IoU gate.
+    pub logits: Option<Vec<f32>>,
+    pub rows: usize,
+    pub cols: usize,
+}
+
+#[derive(Debug, Clone)]
+pub struct MaskDecoder {
+    output_tokens: Vec<f32>,
+    blocks: Vec<Block>,
+    final_attn: Attention,
+    norm_final: Norm,
+    iou_head: Vec<Linear>,
+    hyper: Vec<Vec<Linear>>,
+    /// ConvTranspose2d(256→64, 2, 2) as a 256×(4·64) matrix with columns ordered (dy, dx, c).
+    up1_w: Vec<f32>,
+    up1_b: Vec<f32>,
+    up_ln: Norm,
+    /// ConvTranspose2d(64→32, 2, 2) as a 64×(4·32) matrix, columns (dy, dx, c).
+    up2_w: Vec<f32>,
+    up2_b: Vec<f32>,
+}
+
+/// Reorder a PyTorch ConvTranspose2d weight (in, out, 2, 2) into in × (dy, dx, out).
+fn conv_t_matrix(w: &[f32], n_in: usize, n_out: usize) -> Vec<f32> {
+    let mut m = vec![0.0f32; n_in * 4 * n_out];
+    for i in 0..n_in {
+        for o in 0..n_out {
+            for s in 0..4 {
+                m[i * 4 * n_out + s * n_out + o] = w[(i * n_out + o) * 4 + s];
+            }
+        }
+    }
+    m
+}
+
+fn mlp3(layers: &[Linear], x: &[f32]) -> Vec<f32> {
+    let mut h = x.to_vec();
+    for (i, l) in layers.iter().enumerate() {
+        h = l.forward(&h, 1);
+        if i + 1 < layers.len() {
+            relu_inplace(&mut h);
+        }
+    }
+    h
+}
+
+impl MaskDecoder {
+    /// Load from the `mask_decoder.` prefix of a SAM checkpoint.
+    pub fn load(vb: &VarBuilder) -> candle_core::Result<Self> {
+        let mlp = |vb: VarBuilder, out: usize| -> candle_core::Result<Vec<Linear>> {
+            (0..3)
+                .map(|i| {
+                    Linear::load(
+                        &vb.pp("layers").pp(i),
+                        EMBED_DIM,
+                        if i == 2 { out } else { EMBED_DIM },
+                    )
+                })
+                .collect()
+        };
+        let mut output_tokens = get_vec(&vb.pp("iou_token"), &[1, EMBED_DIM], "weight")?;
+        output_tokens.extend(get_vec(
+            &vb.pp("mask_tokens"),
+            &[NUM_MASK_TOKENS, EMBED_DIM],
+            "weight",
+        )?);
+        let t = vb.pp("transformer");
+        let up = vb.pp("output_upscaling");
+        Ok(Self {
+            output_tokens,
+            blocks: (0..2)
+                .map(|i| Block::load(&t.pp("layers").pp(i)))
+                .collect::<candle_core::Result<_>>()?,
+            final_attn: Attention::load(&t.pp("final_attn_token_to_image"), EMBED_DIM, HEADS, 2)?,
+            norm_final: Norm::load(&t.pp("norm_final_attn"), EMBED_DIM, 1e-5)?,
+            iou_head: mlp(vb.pp("iou_prediction_head"), NUM_MASK_TOKENS)?,
+            hyper: (0..NUM_MASK_TOKENS)
+                .map(|i| mlp(vb.pp("output_hypernetworks_mlps").pp(i), UP2))
+                .collect::<candle_core::Result<_>>()?,
+            up1_w: conv_t_matrix(
+                &get_vec(&up.pp("0"), &[EMBED_DIM, UP1, 2, 2], "weight")?,
+                EMBED_DIM,
+                UP1,
+            ),
+            up1_b: get_vec(&up.pp("0"), &[UP1], "bias")?,
+            up_ln: Norm::load(&up.pp("1"), UP1, 1e-6)?,
+            up2_w: conv_t_matrix(
+                &get_vec(&up.pp("3"), &[UP1, UP2, 2, 2], "weight")?,
+                UP1,
+                UP2,
+            ),
+            up2_b: get_vec(&up.pp("3"), &[UP2], "bias")?,
+        })
+    }
+
+    /// Prompt-independent work for one image. `embedding` is the encoder output (256×64×64,
+    /// channel-major as PyTorch), `pe` the dense positional encoding as tokens, `no_mask` the
+    /// dense prompt embedding used when no mask prompt is given.
+    pub fn prepare(&self, embedding: &[f32], pe: &[f32], no_mask: &[f32]) -> ImageContext {
+        let n = GRID * GRID;
+        let mut keys0 = vec![0.0f32; n * EMBED_DIM];
+        for (c, plane) in embedding.chunks_exact(n).enumerate() {
+            for (t, &v) in plane.iter().enumerate() {
+                keys0[t * EMBED_DIM + c] = v + no_mask[c];
+            }
+        }
+        let mut keys0_pe = vec![0.0f32; n * EMBED_DIM];
+        add_into(&mut keys0_pe, &keys0, pe);
+        let b0 = &self.blocks[0];
+        ImageContext {
+            k0: b0.t2i.k.forward(&keys0_pe, n),
+            v0: b0.t2i.v.forward(&keys0, n),
+            q0: b0.i2t.q.forward(&keys0_pe, n),
+            keys0,
+            pe: pe.to_vec(),
+        }
+    }
+
+    /// Run the two-way transformer for one prompt; returns the output tokens (7×256) and
+    /// leaves the final image tokens in `sc.keys`.
+    fn transformer(&self, ctx: &ImageContext, sparse: &[f32], sc: &mut Scratch) -> Vec<f32> {
+        let n = GRID * GRID;
+        let mut point_embedding = self.output_tokens.clone();
+        point_embedding.extend_from_slice(sparse);
+        let qpe = &point_embedding;
+        let with_pe = |q: &[f32]| -> Vec<f32> { q.iter().zip(qpe).map(|(a, b)| a + b).collect() };
+        sc.keys.resize(n * EMBED_DIM, 0.0);
+        sc.keys_pe.resize(n * EMBED_DIM, 0.0);
+        sc.attn.resize(n * EMBED_DIM, 0.0);
+
+        // Block 0 (skip_first_layer_pe: self-attention without residual).
+        let b = &self.blocks[0];
+        let mut queries = b.self_attn.forward_small(qpe, qpe, qpe, N_TOKENS);
+        b.norm1.apply(&mut queries);
+        let out = b
+            .t2i
+            .tokens_to_precomputed(&with_pe(&queries), N_TOKENS, &ctx.k0, &ctx.v0);
+        add_assign(&mut queries, &out);
+        b.norm2.apply(&mut queries);
+        b.mlp(&mut queries);
+        b.i2t.image_to_tokens(
+            Some(&ctx.q0),
+            &ctx.keys0,
+            &with_pe(&queries),
+            &queries,
+            N_TOKENS,
+            &mut sc.s,
+            &mut sc.attn,
+        );
+        add_into(&mut sc.keys, &ctx.keys0, &sc.attn);
+        b.norm4.apply(&mut sc.keys);
+
+        // Block 1.
+        let b = &self.blocks[1];
+        let q = with_pe(&queries);
+        let out = b.self_attn.forward_small(&q, &q, &queries, N_TOKENS);
+        add_assign(&mut queries, &out);
+        b.norm1.apply(&mut queries);
+        add_into(&mut sc.keys_pe, &sc.keys, &ctx.pe);
+        let out = b.t2i.tokens_to_image_folded(
+            &with_pe(&queries),
+            N_TOKENS,
+            &sc.keys,
+            &sc.keys_pe,
+            &mut sc.s,
+        );
+        add_assign(&mut queries, &out);
+        b.norm2.apply(&mut queries);
+        b.mlp(&mut queries);
+        b.i2t.image_to_tokens(
+            None,
+            &sc.keys_pe,
+            &with_pe(&queries),
+            &queries,
+            N_TOKENS,
+            &mut sc.s,
+            &mut sc.attn,
+        );
+        add_assign(&mut sc.keys, &sc.attn);
+        b.norm4.apply(&mut sc.keys);
+
+        // Final token-to-image attention.
+        add_into(&mut sc.keys_pe, &sc.keys, &ctx.pe);
+        let out = self.final_attn.tokens_to_image_folded(
+            &with_pe(&queries),
+            N_TOKENS,
+            &sc.keys,
+            &sc.keys_pe,
+            &mut sc.s,
+        );
+        add_assign(&mut queries, &out);
+        self.norm_final.apply(&mut queries);
+        queries
+    }
+
+    /// Decode one point prompt. `sparse` are its two sparse tokens (see
+    /// `PromptEncoder::point_tokens`); low-res logits are produced for the top-left
+    /// `tok_rows`×`tok_cols` embedding cells (×4 in each direction) when any of the three
+    /// multimask IoU predictions exceeds `iou_gate` (use `f32::NEG_INFINITY` to always get them).
+    pub fn decode(
+        &self,
+        ctx: &ImageContext,
+        sparse: &[f32],
+        (tok_rows, tok_cols): (usize, usize),
+        iou_gate: f32,
+        sc: &mut Scratch,
+    ) -> PromptMasks {
+        let hs = self.transformer(ctx, sparse, sc);
+        let iou = mlp3(&self.iou_head, &hs[..EMBED_DIM]);
+        let iou_pred = [iou[1], iou[2], iou[3]];
+        let (rows, cols) = (4 * tok_rows, 4 * tok_cols);
+        if iou_pred.iter().all(|&p| p <= iou_gate) {
+            return PromptMasks {
+                iou_pred,
+                logits: None,
+                rows,
+                cols,
+            };
+        }
+        // Hypernetwork weights for the multimask outputs (mask tokens 1..4): 3×32.
+        let mut hyper = Vec::with_capacity(3 * UP2);
+        for m in 1..NUM_MASK_TOKENS {
+            hyper.extend(mlp3(
+                &self.hyper[m],
+                &hs[(1 + m) * EMBED_DIM..(2 + m) * EMBED_DIM],
+            ));
+        }
+        let logits = self.upscale(&sc.keys, &hyper, tok_rows, tok_cols);
+        PromptMasks {
+            iou_pred,
+            logits: Some(logits),
+            rows,
+            cols,
+        }
+    }
+
+    /// Output upscaling + hypernetwork products over the top-left tok_rows×tok_cols cells.
+    fn upscale(&self, keys: &[f32], hyper: &[f32], tok_rows: usize, tok_cols: usize) -> Vec<f32> {
+        let nt = tok_rows * tok_cols;
+        let mut x = Vec::with_capacity(nt * EMBED_DIM);
+        for ty in 0..tok_rows {
+            x.extend_from_slice(&keys[ty * GRID * EMBED_DIM..(ty * GRID + tok_cols) * EMBED_DIM]);
+        }
+        // Stage 1: 256 → 4 sub-pixels × 64, LayerNorm2d over the 64 channels, GELU.
+        let mut y1 = vec![0.0f32; nt * 4 * UP1];
+        for row in y1.chunks_exact_mut(UP1) {
+            row.copy_from_slice(&self.up1_b);
+        }
+        matmul(
+            nt,
+            4 * UP1,
+            EMBED_DIM,
+            &x,
+            (EMBED_DIM, 1),
+            &self.up1_w,
+            (4 * UP1, 1),
+            &mut y1,
+            4 * UP1,
+            true,
+        );
+        self.up_ln.apply(&mut y1);
+        gelu_inplace(&mut y1);
+        // Stage 2: 64 → 4 sub-pixels × 32, GELU.
+        let mut y2 = vec![0.0f32; nt * 16 * UP2];
+        for row in y2.chunks_exact_mut(UP2) {
+            row.copy_from_slice(&self.up2_b);
+        }
+        matmul(
+            nt * 4,
+            4 * UP2,
+            UP1,
+            &y1,
+            (UP1, 1),
+            &self.up2_w,
+            (4 * UP2, 1),
+            &mut y2,
+            4 * UP2,
+            true,
+        );
+        gelu_inplace(&mut y2);
+        // Masks: each 32-channel pixel dotted with the three hypernetwork vectors.
+        let mut m = vec![0.0f32; nt * 16 * 3];
+        matmul(
+            nt * 16,
+            3,
+            UP2,
+            &y2,
+            (UP2, 1),
+            hyper,
+            (1, UP2),
+            &mut m,
+            3,
+            false,
+        );
+        let (rows, cols) = (4 * tok_rows, 4 * tok_cols);
+        let mut out = vec![0.0f32; 3 * rows * cols];
+        for (r, px) in m.chunks_exact(3).enumerate() {
+            // r = ((token · 4 + s1) · 4 + s2), s = dy·2 + dx at each stage.
+            let (token, s1, s2) = (r / 16, (r / 4) % 4, r % 4);
+            let y = 4 * (token / tok_cols) + 2 * (s1 / 2) + s2 / 2;
+            let xx = 4 * (token % tok_cols) + 2 * (s1 % 2) + s2 % 2;
+            for (k, &v) in px.iter().enumerate() {
+                out[(k * rows + y) * cols + xx] = v;
+            }
+        }
+        out
+    }
+}

@@ -1,0 +1,142 @@
+//! Times the rasterizer on the benchmark scenes with a phase breakdown, plus this
+//! machine's rates for the floor (docs/performance.md, "## Rasterizer"):
+//!
+//! `cargo run --release -p splat --example raster_probe -- [a|b|probe|case03] [reps]`
+//! (`/usr/bin/time -v` around it gives the peak memory of a scenario).
+
+use splat::{Gradients, Rasterizer, RenderOptions};
+use std::time::Instant;
+
+#[path = "../benches/scene_gen.rs"]
+mod scene_gen;
+
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Median wall seconds of `reps` runs of `f`.
+fn time(reps: usize, mut f: impl FnMut()) -> f64 {
+    let v: Vec<f64> = (0..reps)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64()
+        })
+        .collect();
+    median(v)
+}
+
+fn scenario(n: usize, w: u32, h: u32, reps: usize) {
+    let scene = scene_gen::BenchScene::new(7, n, w, h);
+    let g = scene.gaussians();
+    let mut r = Rasterizer::new();
+    let opts = RenderOptions::default();
+    let top8 = RenderOptions {
+        topk: 8,
+        ..Default::default()
+    };
+    let dl: Vec<f32> = (0..(w * h * 3) as usize)
+        .map(|i| (i % 7) as f32 / 7.0 - 0.5)
+        .collect();
+    let mut grads = Gradients::default();
+    let f = time(reps, || {
+        r.forward(&g, &scene.cam, &opts).expect("forward");
+    });
+    println!("forward phases: {:?}", r.timings());
+    let b = time(reps, || {
+        r.backward(&g, &scene.cam, &opts, &dl, None, &mut grads)
+            .expect("backward");
+    });
+    println!("backward phases: {:?}", r.timings());
+    let t8 = time(reps, || {
+        r.forward(&g, &scene.cam, &top8).expect("forward");
+    });
+    let out = r.forward(&g, &scene.cam, &opts).expect("forward");
+    let visible = out.radii.iter().filter(|r| r[0] > 0).count();
+    let (isects, pairs) = (out.n_isects, r.evaluated_pairs());
+    println!(
+        "N {n} {w}x{h}: visible {visible}, intersections {isects}, evaluated pairs {pairs}\n\
+         forward {f:.4} s ({:.3e} pairs/s), backward {b:.4} s ({:.3e} pairs/s), \
+         forward+top8 {t8:.4} s (+{:.1}%)",
+        pairs as f64 / f,
+        pairs as f64 / b,
+        100.0 * (t8 / f - 1.0)
+    );
+}
+
+/// Arithmetic rate of an autovectorized f32 multiply-add loop on L1-resident data and
+/// memory bandwidth of a large sum, both on all rayon threads.
+fn probe() {
+    use rayon::prelude::*;
+    let threads = rayon::current_num_threads();
+    let reps = 200_000usize;
+    let t = Instant::now();
+    let acc: f32 = (0..threads)
+        .into_par_iter()
+        .map(|s| {
+            let mut x = [s as f32 * 1e-3; 64];
+            for _ in 0..reps {
+                for v in x.iter_mut() {
+                    *v = *v * 0.999_9 + 1e-4;
+                }
+            }
+            x.iter().sum::<f32>()
+        })
+        .sum();
+    let flops = (threads * reps * 64 * 2) as f64 / t.elapsed().as_secs_f64();
+    let big = vec![1.0f32; 64 << 20];
+    let t = Instant::now();
+    let mut total = 0.0f32;
+    for _ in 0..3 {
+        total += big
+            .par_chunks(1 << 16)
+            .map(|c| c.iter().sum::<f32>())
+            .sum::<f32>();
+    }
+    let bw = (3 * big.len() * 4) as f64 / t.elapsed().as_secs_f64();
+    println!(
+        "threads {threads}: {flops:.3e} f32 flop/s (mul+add, autovectorized), read bandwidth {:.2} GB/s [{acc} {total}]",
+        bw / 1e9
+    );
+}
+
+/// Forward + backward of reference case 03 (gsplat's PyTorch CPU path: ≈ 0.22 s).
+fn case03(reps: usize) {
+    let (case, _) = common::Case::load(common::CASES[2]);
+    let g = case.gaussians();
+    let mut r = Rasterizer::new();
+    let mut grads = Gradients::default();
+    let aw = case.alpha_weights.clone();
+    let wall = time(reps, || {
+        r.forward(&g, &case.cam, &case.opts).expect("forward");
+        r.backward(
+            &g,
+            &case.cam,
+            &case.opts,
+            &case.weights,
+            aw.as_deref(),
+            &mut grads,
+        )
+        .expect("backward");
+    });
+    println!(
+        "case 03 forward+backward: {wall:.5} s (median of {reps}); \
+         gsplat PyTorch CPU 0.22 s is {:.0}x that",
+        0.22 / wall
+    );
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let reps = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(3);
+    match args.get(1).map(String::as_str) {
+        Some("b") => scenario(500_000, 1440, 1080, reps),
+        Some("probe") => probe(),
+        Some("case03") => case03(reps),
+        _ => scenario(100_000, 800, 800, reps),
+    }
+}

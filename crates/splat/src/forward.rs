@@ -1,0 +1,302 @@
+//! Forward rasterization of one 16×16 tile (gsplat `rasterize_to_pixels_fwd`, classic):
+//! front to back, `σ = ½(a dx² + c dy²) + b dx dy`, `α = min(0.999, o·e^{−σ})`, skip
+//! `σ < 0` or `α < 1/255`, stop a pixel before the Gaussian that would make
+//! `T(1−α) ≤ 1e-4`.
+//!
+//! Layout for vectorization: per-pixel state is kept as 16 rows of 16 lanes; each Gaussian
+//! updates the rows its alpha can reach (see [`Splat::hy`]) with a branch-free loop over
+//! 16 pixels that LLVM turns into SIMD. A finished pixel has `T = 0` (so every later test
+//! fails) and keeps its final transmittance in `tfin`.
+
+use crate::fastexp;
+
+pub(crate) const ALPHA_MIN: f32 = 1.0 / 255.0;
+pub(crate) const ALPHA_MAX: f32 = 0.999;
+pub(crate) const T_MIN: f32 = 1e-4;
+pub(crate) const TS: usize = crate::TILE_SIZE as usize;
+pub(crate) const TP: usize = TS * TS;
+
+/// One projected Gaussian as the tile kernels read it.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Splat {
+    pub mx: f32,
+    pub my: f32,
+    pub a: f32,
+    pub b: f32,
+    pub c: f32,
+    pub o: f32,
+    pub rgb: [f32; 3],
+    /// Rows with |y − my| > hy cannot reach α ≥ 1/255: there min over x of σ is
+    /// ½·dy²·(c − b²/a) > ln(255·o). Negative when o < 1/255 (never visible).
+    pub hy: f32,
+}
+
+impl Splat {
+    pub fn new(mean2d: [f32; 2], conic: [f32; 3], o: f32, rgb: [f32; 3]) -> Self {
+        let [a, b, c] = conic;
+        let thr = (255.0 * o).ln();
+        let hy = if thr < 0.0 {
+            -1.0
+        } else {
+            let rowk = (c - b * b / a).max(1e-20);
+            // Margin so f32 rounding never drops a row that the exact test would keep.
+            (2.0 * thr / rowk).sqrt() * 1.001 + 0.01
+        };
+        Splat {
+            mx: mean2d[0],
+            my: mean2d[1],
+            a,
+            b,
+            c,
+            o,
+            rgb,
+            hy,
+        }
+    }
+
+    /// Rows `[r0, r1)` of the tile starting at pixel row `y0` that the Gaussian may reach.
+    #[inline(always)]
+    pub fn rows(&self, y0: u32) -> (usize, usize) {
+        if self.hy < 0.0 {
+            return (0, 0);
+        }
+        let lo = (self.my - self.hy - y0 as f32 - 0.5).ceil();
+        let hi = (self.my + self.hy - y0 as f32 - 0.5).floor();
+        let r0 = lo.max(0.0).min(TS as f32) as usize;
+        let r1 = (hi + 1.0).max(0.0).min(TS as f32) as usize;
+        (r0, r1.max(r0))
+    }
+}
+
+/// Where a tile lies and what to render.
+pub(crate) struct TileCtx {
+    pub x0: u32,
+    pub y0: u32,
+    /// Pixels of the tile inside the image.
+    pub cols: usize,
+    pub rows: usize,
+    pub k: usize,
+    pub bg: [f32; 3],
+}
+
+/// One tile's slices of the tile-major output buffers.
+pub(crate) struct TileOut<'a> {
+    /// `3·256` planar colour (R plane, G plane, B plane), background included.
+    pub color: &'a mut [f32],
+    /// `256` final transmittance.
+    pub tfin: &'a mut [f32],
+    /// `256` one past the list position of the last composited Gaussian.
+    pub last: &'a mut [u32],
+    /// `256·k` top-k ids and weights, largest first.
+    pub topk_ids: &'a mut [u32],
+    pub topk_w: &'a mut [f32],
+}
+
+/// Renders one tile; returns the number of (pixel, Gaussian) pairs evaluated.
+/// `list` holds depth ranks indexing `splats`; `gids` maps a rank to its global index.
+pub(crate) fn render_tile(
+    avx2: bool,
+    ctx: &TileCtx,
+    list: &[u32],
+    splats: &[Splat],
+    gids: &[u32],
+    out: TileOut,
+) -> u64 {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: the caller checked that the CPU supports AVX2 and FMA.
+        return unsafe {
+            if ctx.k > 0 {
+                tile_avx2::<true>(ctx, list, splats, gids, out)
+            } else {
+                tile_avx2::<false>(ctx, list, splats, gids, out)
+            }
+        };
+    }
+    let _ = avx2;
+    if ctx.k > 0 {
+        tile_impl::<true>(ctx, list, splats, gids, out)
+    } else {
+        tile_impl::<false>(ctx, list, splats, gids, out)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn tile_avx2<const TOPK: bool>(
+    ctx: &TileCtx,
+    list: &[u32],
+    splats: &[Splat],
+    gids: &[u32],
+    out: TileOut,
+) -> u64 {
+    tile_impl::<TOPK>(ctx, list, splats, gids, out)
+}
+
+/// Per-pixel compositing state of a tile, row-major 16×16.
+struct State {
+    t: [f32; TP],
+    tfin: [f32; TP],
+    col: [[f32; TP]; 3],
+    last: [u32; TP],
+    live: [bool; TS],
+    /// Smallest weight in each pixel's top-k list (0 while not full), so that the common
+    /// "no insertion" case is one vector compare per row.
+    kmin: [f32; TP],
+}
+
+impl State {
+    fn new(ctx: &TileCtx) -> Self {
+        let mut s = State {
+            t: [0.0; TP],
+            tfin: [1.0; TP],
+            col: [[0.0; TP]; 3],
+            last: [0; TP],
+            live: [false; TS],
+            kmin: [0.0; TP],
+        };
+        for r in 0..ctx.rows {
+            s.t[r * TS..r * TS + ctx.cols].fill(1.0);
+            s.live[r] = true;
+        }
+        s
+    }
+}
+
+#[inline(always)]
+fn tile_impl<const TOPK: bool>(
+    ctx: &TileCtx,
+    list: &[u32],
+    splats: &[Splat],
+    gids: &[u32],
+    out: TileOut,
+) -> u64 {
+    let mut s = State::new(ctx);
+    let px: [f32; TS] = std::array::from_fn(|l| ctx.x0 as f32 + l as f32 + 0.5);
+    let mut wrow = [0.0f32; TS];
+    let mut pairs = 0u64;
+    for (pos, &rank) in list.iter().enumerate() {
+        let sp = &splats[rank as usize];
+        let (r0, r1) = sp.rows(ctx.y0);
+        for r in r0..r1 {
+            if !s.live[r] {
+                continue;
+            }
+            pairs += TS as u64;
+            let dy = sp.my - (ctx.y0 as f32 + r as f32 + 0.5);
+            let span = r * TS..(r + 1) * TS;
+            let row = Row {
+                t: (&mut s.t[span.clone()]).try_into().expect("16"),
+                tfin: (&mut s.tfin[span.clone()]).try_into().expect("16"),
+                last: (&mut s.last[span.clone()]).try_into().expect("16"),
+            };
+            let [cr, cg, cb] = &mut s.col;
+            let cols = [
+                (&mut cr[span.clone()]).try_into().expect("16"),
+                (&mut cg[span.clone()]).try_into().expect("16"),
+                (&mut cb[span.clone()]).try_into().expect("16"),
+            ];
+            let live = composite_row(sp, &px, dy, pos as u32 + 1, row, cols, &mut wrow);
+            s.live[r] = live;
+            if TOPK {
+                let kmin: &mut [f32; TS] = (&mut s.kmin[span]).try_into().expect("16");
+                if wrow
+                    .iter()
+                    .zip(kmin.iter())
+                    .fold(false, |a, (w, m)| a | (w > m))
+                {
+                    let (ids, ws) = (&mut out.topk_ids[..], &mut out.topk_w[..]);
+                    insert_topk(ctx.k, r, &wrow, gids[rank as usize], ids, ws, kmin);
+                }
+            }
+        }
+        if (pos & 7) == 7 && !s.live.iter().any(|&l| l) {
+            break;
+        }
+    }
+    finish(ctx, &s, out);
+    pairs
+}
+
+struct Row<'a> {
+    t: &'a mut [f32; TS],
+    tfin: &'a mut [f32; TS],
+    last: &'a mut [u32; TS],
+}
+
+/// Composites one Gaussian over one row of 16 pixels; returns whether any pixel of the
+/// row is still unfinished. `wrow` receives each pixel's weight T·α (0 if not composited).
+#[inline(always)]
+fn composite_row(
+    sp: &Splat,
+    px: &[f32; TS],
+    dy: f32,
+    pos1: u32,
+    row: Row,
+    cols: [&mut [f32; TS]; 3],
+    wrow: &mut [f32; TS],
+) -> bool {
+    let [cr, cg, cb] = cols;
+    let mut live = 0u32;
+    for l in 0..TS {
+        let dx = sp.mx - px[l];
+        let sigma = 0.5 * (sp.a * dx * dx + sp.c * dy * dy) + sp.b * dx * dy;
+        let alpha = (sp.o * fastexp::exp(-sigma)).min(ALPHA_MAX);
+        let t = row.t[l];
+        let ok = (sigma >= 0.0) & (alpha >= ALPHA_MIN) & (t > 0.0);
+        let next = t * (1.0 - alpha);
+        let contrib = ok & (next > T_MIN);
+        let term = ok & (next <= T_MIN);
+        let w = if contrib { alpha * t } else { 0.0 };
+        cr[l] += w * sp.rgb[0];
+        cg[l] += w * sp.rgb[1];
+        cb[l] += w * sp.rgb[2];
+        row.tfin[l] = if term { t } else { row.tfin[l] };
+        let tn = if contrib { next } else { t };
+        let tn = if term { 0.0 } else { tn };
+        row.t[l] = tn;
+        row.last[l] = if contrib { pos1 } else { row.last[l] };
+        wrow[l] = w;
+        live |= (tn > 0.0) as u32;
+    }
+    live != 0
+}
+
+/// Inserts this row's positive weights into the pixels' sorted top-k lists.
+#[inline(always)]
+fn insert_topk(
+    k: usize,
+    r: usize,
+    wrow: &[f32; TS],
+    gid: u32,
+    ids: &mut [u32],
+    ws: &mut [f32],
+    kmin: &mut [f32; TS],
+) {
+    for (l, &w) in wrow.iter().enumerate() {
+        let base = (r * TS + l) * k;
+        if w <= kmin[l] {
+            continue;
+        }
+        let mut j = k - 1;
+        while j > 0 && ws[base + j - 1] < w {
+            ws[base + j] = ws[base + j - 1];
+            ids[base + j] = ids[base + j - 1];
+            j -= 1;
+        }
+        ws[base + j] = w;
+        ids[base + j] = gid;
+        kmin[l] = ws[base + k - 1];
+    }
+}
+
+fn finish(ctx: &TileCtx, s: &State, out: TileOut) {
+    for p in 0..TP {
+        let t = if s.t[p] > 0.0 { s.t[p] } else { s.tfin[p] };
+        out.tfin[p] = t;
+        out.last[p] = s.last[p];
+        for c in 0..3 {
+            out.color[c * TP + p] = s.col[c][p] + t * ctx.bg[c];
+        }
+    }
+}

@@ -1,0 +1,130 @@
+//! `splat`: a CPU rasterizer for 3D Gaussians, following gsplat's "classic" mode.
+//!
+//! Conventions (DESIGN.md): OpenCV camera axes, world→camera 4×4, pixel centres at +0.5,
+//! 2D covariance + `eps2d` (0.3) on the diagonal, near plane z ≤ 0.01 culled, per-axis
+//! 3.33σ boxes, 16×16 tiles, depth sort, `alpha = min(0.999, o·exp(-σ))`, skip
+//! `alpha < 1/255`, stop before the Gaussian that would make `T·(1−alpha) ≤ 1e-4`, zero
+//! gradient where the 0.999 clamp binds, `C = Σ cᵢαᵢTᵢ + T_final·background`.
+//!
+//! Layouts: every per-Gaussian array is structure-of-arrays `f32`, row-major:
+//! `means (N·3)`, `quats (N·4, w x y z, unnormalized)`, `scales (N·3, linear, not log)`,
+//! `opacity_logits (N)`, SH `(N·K·3)` coefficient-major then RGB, or RGB `(N·3)`.
+//! Images are `H·W·3` interleaved RGB, row-major; alpha and per-pixel maps are `H·W`;
+//! top-k maps are `H·W·k`.
+//!
+//! Scales are linear because deformable 3DGS adds the field's δs to `exp(log_scale)`
+//! (DESIGN.md, "Deformation"); callers that hold log-scales chain `d/dlog s = s · d/ds`.
+
+mod backward;
+mod bin;
+pub mod camera;
+mod error;
+mod fastexp;
+mod forward;
+mod project;
+mod raster;
+pub mod reference;
+pub mod sh;
+mod validate;
+
+pub use camera::Camera;
+pub use error::SplatError;
+pub use raster::{Rasterizer, Timings};
+
+/// Side of a square tile in pixels.
+pub const TILE_SIZE: u32 = 16;
+
+/// Per-Gaussian colour source.
+#[derive(Clone, Copy, Debug)]
+pub enum Colors<'a> {
+    /// Spherical-harmonic coefficients `(N·K·3)`, K = `num_coeffs` per Gaussian (≥ (degree+1)²).
+    /// Only the first `(degree+1)²` coefficients are used; colour = max(SH·basis + 0.5, 0),
+    /// evaluated along the view direction `mean − camera centre`.
+    Sh {
+        coeffs: &'a [f32],
+        num_coeffs: usize,
+        degree: usize,
+    },
+    /// RGB `(N·3)` used as is (no offset, no clamp).
+    Rgb(&'a [f32]),
+}
+
+/// A borrowed set of N Gaussians (see the crate docs for layouts).
+#[derive(Clone, Copy, Debug)]
+pub struct Gaussians<'a> {
+    pub means: &'a [f32],
+    pub quats: &'a [f32],
+    pub scales: &'a [f32],
+    pub opacity_logits: &'a [f32],
+    pub colors: Colors<'a>,
+}
+
+impl Gaussians<'_> {
+    pub fn len(&self) -> usize {
+        self.opacity_logits.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.opacity_logits.is_empty()
+    }
+}
+
+/// Options of one render.
+#[derive(Clone, Debug)]
+pub struct RenderOptions {
+    pub background: [f32; 3],
+    /// Per-pixel top-k contributors to record (0 = none, at no cost).
+    pub topk: usize,
+    /// Added to the diagonal of the 2D covariance (gsplat classic: 0.3).
+    pub eps2d: f32,
+    /// Gaussians with camera z ≤ near_plane are culled (0.01).
+    pub near_plane: f32,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        Self {
+            background: [0.0; 3],
+            topk: 0,
+            eps2d: 0.3,
+            near_plane: 0.01,
+        }
+    }
+}
+
+/// What a forward pass produced; borrowed from the [`Rasterizer`]'s reused buffers.
+#[derive(Debug)]
+pub struct ForwardOutput<'a> {
+    pub width: u32,
+    pub height: u32,
+    /// `H·W·3`, background included.
+    pub image: &'a [f32],
+    /// `H·W`, = 1 − T_final.
+    pub alpha: &'a [f32],
+    /// `H·W·k` global Gaussian indices, largest weight first; `u32::MAX` where fewer than k.
+    pub topk_ids: &'a [u32],
+    /// `H·W·k` weights `w = T·α` matching `topk_ids` (0 where none).
+    pub topk_weights: &'a [f32],
+    /// `N·2` per-axis screen radii in pixels (0 = culled / not visible).
+    pub radii: &'a [[i32; 2]],
+    /// `N·2` projected means in pixels.
+    pub means2d: &'a [[f32; 2]],
+    /// `N` camera depths.
+    pub depths: &'a [f32],
+    /// Number of (tile, Gaussian) intersections.
+    pub n_isects: usize,
+}
+
+/// Gradients of a scalar loss with respect to every input of [`Gaussians`], same layouts.
+/// Buffers are resized (not reallocated when large enough) by [`Rasterizer::backward`].
+#[derive(Clone, Debug, Default)]
+pub struct Gradients {
+    pub means: Vec<f32>,
+    pub quats: Vec<f32>,
+    pub scales: Vec<f32>,
+    pub opacity_logits: Vec<f32>,
+    /// SH `(N·K·3)` (zero beyond the active degree) or RGB `(N·3)`, matching the input.
+    pub colors: Vec<f32>,
+    /// `N·2` gradient w.r.t. the projected means in pixels, as 3DGS accumulates for
+    /// densification (multiply by (W/2, H/2) for 3DGS's NDC units).
+    pub means2d: Vec<[f32; 2]>,
+}

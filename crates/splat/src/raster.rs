@@ -1,0 +1,424 @@
+//! The [`Rasterizer`]: owns every buffer of the forward and backward passes and runs them,
+//! in parallel over Gaussians (projection) and over tiles (rasterization).
+
+use crate::backward::{backward_tile, GradAcc, TileGradIn};
+use crate::bin::Bins;
+use crate::forward::{render_tile, Splat, TileCtx, TileOut, TP, TS};
+use crate::project::{project, project_vjp, CamInfo, GaussGradMut, ProjGrad, Projected};
+use crate::validate::{validate_backward, validate_forward};
+use crate::{Camera, Colors, ForwardOutput, Gaussians, Gradients, RenderOptions, SplatError};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+/// Wall-clock seconds of the phases of the last [`Rasterizer::forward`] or
+/// [`Rasterizer::backward`] call (for performance breakdowns).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Timings {
+    /// Forward: projection + SH. Backward: projection and SH backward.
+    pub project: f64,
+    /// Forward: tile binning and depth sort. Backward: reduction of per-thread sums.
+    pub bin: f64,
+    /// Tile rasterization (forward or backward kernels).
+    pub raster: f64,
+    /// Forward: copy to row-major outputs. Backward: zeroing accumulators.
+    pub finish: f64,
+}
+
+/// Owns every buffer the forward and backward passes reuse across calls.
+#[derive(Default)]
+pub struct Rasterizer {
+    proj: Vec<Projected>,
+    splats: Vec<Splat>,
+    radii: Vec<[i32; 2]>,
+    means2d: Vec<[f32; 2]>,
+    depths: Vec<f32>,
+    bins: Bins,
+    tile_color: Vec<f32>,
+    tile_tfin: Vec<f32>,
+    tile_last: Vec<u32>,
+    tile_topk_ids: Vec<u32>,
+    tile_topk_w: Vec<f32>,
+    image: Vec<f32>,
+    alpha: Vec<f32>,
+    topk_ids: Vec<u32>,
+    topk_weights: Vec<f32>,
+    accs: Vec<Vec<GradAcc>>,
+    proj_grads: Vec<GradAcc>,
+    fwd_pairs: u64,
+    timings: Timings,
+    /// (N, width, height) of the last forward pass.
+    shape: Option<(usize, u32, u32)>,
+}
+
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+impl Rasterizer {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// (pixel, Gaussian) pairs the last forward pass evaluated (rows of 16 pixels that a
+    /// Gaussian's alpha can reach, in tiles where pixels were still unfinished).
+    pub fn evaluated_pairs(&self) -> u64 {
+        self.fwd_pairs
+    }
+
+    /// Phase timings of the last forward or backward call.
+    pub fn timings(&self) -> Timings {
+        self.timings
+    }
+
+    /// Renders `g` from `cam`; keeps what the backward pass needs.
+    pub fn forward(
+        &mut self,
+        g: &Gaussians,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> Result<ForwardOutput<'_>, SplatError> {
+        validate_forward(g, cam)?;
+        let ci = CamInfo::new(cam, opts);
+        let n = g.len();
+        let t0 = Instant::now();
+        self.proj.clear();
+        self.proj
+            .par_extend((0..n).into_par_iter().map(|i| project(g, i, &ci)));
+        self.radii.clear();
+        self.radii.extend(self.proj.iter().map(|p| p.radii));
+        self.means2d.clear();
+        self.means2d.extend(self.proj.iter().map(|p| p.mean2d));
+        self.depths.clear();
+        self.depths.extend(self.proj.iter().map(|p| p.depth));
+        let t1 = Instant::now();
+        self.bins.build(&self.proj, cam.width, cam.height);
+        // Splats in depth order: tile lists (depth ranks) then read memory forwards.
+        let proj = &self.proj;
+        self.splats.clear();
+        self.splats
+            .par_extend(self.bins.order.par_iter().map(|&gid| {
+                let p = &proj[gid as usize];
+                Splat::new(p.mean2d, p.conic, p.opacity, p.rgb)
+            }));
+        let t2 = Instant::now();
+        self.rasterize(cam, opts);
+        let t3 = Instant::now();
+        self.scatter(cam, opts.topk);
+        self.timings = Timings {
+            project: (t1 - t0).as_secs_f64(),
+            bin: (t2 - t1).as_secs_f64(),
+            raster: (t3 - t2).as_secs_f64(),
+            finish: t3.elapsed().as_secs_f64(),
+        };
+        self.shape = Some((n, cam.width, cam.height));
+        Ok(ForwardOutput {
+            width: cam.width,
+            height: cam.height,
+            image: &self.image,
+            alpha: &self.alpha,
+            topk_ids: &self.topk_ids,
+            topk_weights: &self.topk_weights,
+            radii: &self.radii,
+            means2d: &self.means2d,
+            depths: &self.depths,
+            n_isects: self.bins.n_isects(),
+        })
+    }
+
+    fn rasterize(&mut self, cam: &Camera, opts: &RenderOptions) {
+        let n_tiles = self.bins.tiles_x * self.bins.tiles_y;
+        let k = opts.topk;
+        resize(&mut self.tile_color, n_tiles * 3 * TP, 0.0);
+        resize(&mut self.tile_tfin, n_tiles * TP, 0.0);
+        resize(&mut self.tile_last, n_tiles * TP, 0);
+        resize(&mut self.tile_topk_ids, n_tiles * TP * k, u32::MAX);
+        resize(&mut self.tile_topk_w, n_tiles * TP * k, 0.0);
+        let avx2 = has_avx2();
+        let (bins, splats) = (&self.bins, &self.splats);
+        let run = |tile: usize, out: TileOut| {
+            let ctx = tile_ctx(tile, bins.tiles_x, cam, opts);
+            render_tile(avx2, &ctx, bins.tile_list(tile), splats, &bins.order, out)
+        };
+        let main = self
+            .tile_color
+            .par_chunks_mut(3 * TP)
+            .zip(self.tile_tfin.par_chunks_mut(TP))
+            .zip(self.tile_last.par_chunks_mut(TP))
+            .enumerate();
+        self.fwd_pairs = if k == 0 {
+            main.map(|(t, ((color, tfin), last))| {
+                let (topk_ids, topk_w) = (&mut [][..], &mut [][..]);
+                run(
+                    t,
+                    TileOut {
+                        color,
+                        tfin,
+                        last,
+                        topk_ids,
+                        topk_w,
+                    },
+                )
+            })
+            .sum()
+        } else {
+            main.zip(self.tile_topk_ids.par_chunks_mut(TP * k))
+                .zip(self.tile_topk_w.par_chunks_mut(TP * k))
+                .map(|(((t, ((color, tfin), last)), topk_ids), topk_w)| {
+                    run(
+                        t,
+                        TileOut {
+                            color,
+                            tfin,
+                            last,
+                            topk_ids,
+                            topk_w,
+                        },
+                    )
+                })
+                .sum()
+        };
+    }
+
+    /// Copies the tile-major results into the row-major outputs.
+    fn scatter(&mut self, cam: &Camera, k: usize) {
+        let w = cam.width as usize;
+        let h = cam.height as usize;
+        resize(&mut self.image, w * h * 3, 0.0);
+        resize(&mut self.alpha, w * h, 0.0);
+        let tiles_x = self.bins.tiles_x;
+        // (tile, pixel-in-tile) of image pixel (x, y).
+        let at = move |x: usize, y: usize| ((y / TS) * tiles_x + x / TS, (y % TS) * TS + x % TS);
+        let (tc, tt) = (&self.tile_color, &self.tile_tfin);
+        self.image
+            .par_chunks_mut(w * 3)
+            .zip(self.alpha.par_chunks_mut(w))
+            .enumerate()
+            .for_each(|(y, (img, alp))| {
+                for x in 0..w {
+                    let (tile, p) = at(x, y);
+                    for c in 0..3 {
+                        img[3 * x + c] = tc[tile * 3 * TP + c * TP + p];
+                    }
+                    alp[x] = 1.0 - tt[tile * TP + p];
+                }
+            });
+        resize(&mut self.topk_ids, w * h * k, u32::MAX);
+        resize(&mut self.topk_weights, w * h * k, 0.0);
+        if k == 0 {
+            return;
+        }
+        let (tki, tkw) = (&self.tile_topk_ids, &self.tile_topk_w);
+        self.topk_ids
+            .par_chunks_mut(w * k)
+            .zip(self.topk_weights.par_chunks_mut(w * k))
+            .enumerate()
+            .for_each(|(y, (ids, ws))| {
+                for x in 0..w {
+                    let (tile, p) = at(x, y);
+                    let src = (tile * TP + p) * k;
+                    ids[x * k..(x + 1) * k].copy_from_slice(&tki[src..src + k]);
+                    ws[x * k..(x + 1) * k].copy_from_slice(&tkw[src..src + k]);
+                }
+            });
+    }
+
+    /// Gradients of a loss given `dL/dimage` (H·W·3) and optionally `dL/dalpha` (H·W), for the
+    /// same `g`, `cam`, `opts` as the last `forward`.
+    pub fn backward(
+        &mut self,
+        g: &Gaussians,
+        cam: &Camera,
+        opts: &RenderOptions,
+        dl_dimage: &[f32],
+        dl_dalpha: Option<&[f32]>,
+        grads: &mut Gradients,
+    ) -> Result<(), SplatError> {
+        validate_backward(g, cam, self.shape, dl_dimage, dl_dalpha)?;
+        let t0 = Instant::now();
+        self.zero_accs();
+        let t1 = Instant::now();
+        self.accumulate_tiles(cam, opts, dl_dimage, dl_dalpha);
+        let t2 = Instant::now();
+        self.reduce_accs(g.len());
+        let t3 = Instant::now();
+        self.project_backward(g, cam, opts, grads);
+        self.timings = Timings {
+            finish: (t1 - t0).as_secs_f64(),
+            raster: (t2 - t1).as_secs_f64(),
+            bin: (t3 - t2).as_secs_f64(),
+            project: t3.elapsed().as_secs_f64(),
+        };
+        Ok(())
+    }
+
+    /// One zeroed gradient accumulator per rayon thread.
+    fn zero_accs(&mut self) {
+        let n = self.bins.order.len();
+        let threads = rayon::current_num_threads().max(1);
+        self.accs.resize_with(threads, Vec::new);
+        self.accs
+            .par_iter_mut()
+            .for_each(|a| resize(a, n, [0.0; 9]));
+    }
+
+    fn accumulate_tiles(
+        &mut self,
+        cam: &Camera,
+        opts: &RenderOptions,
+        dl_dimage: &[f32],
+        dl_dalpha: Option<&[f32]>,
+    ) {
+        let n_tiles = self.bins.tiles_x * self.bins.tiles_y;
+        let next = AtomicUsize::new(0);
+        let avx2 = has_avx2();
+        let (bins, splats) = (&self.bins, &self.splats);
+        let (tfin, last) = (&self.tile_tfin, &self.tile_last);
+        let w = cam.width as usize;
+        // One job per thread pulling tiles from a shared counter: dynamic balance and one
+        // private accumulator per job, so no atomics on gradients.
+        self.accs.par_iter_mut().for_each(|acc| loop {
+            let tile = next.fetch_add(1, Ordering::Relaxed);
+            if tile >= n_tiles {
+                break;
+            }
+            let list = bins.tile_list(tile);
+            if list.is_empty() {
+                continue;
+            }
+            let (x0, y0) = ((tile % bins.tiles_x) * TS, (tile / bins.tiles_x) * TS);
+            let mut v_color = [0.0f32; 3 * TP];
+            let mut v_alpha_eff = [0.0f32; TP];
+            let (cols, rows) = ((w - x0).min(TS), (cam.height as usize - y0).min(TS));
+            for r in 0..rows {
+                for l in 0..cols {
+                    let (p, pix) = (r * TS + l, (y0 + r) * w + x0 + l);
+                    let mut bgdot = 0.0;
+                    for c in 0..3 {
+                        let v = dl_dimage[3 * pix + c];
+                        v_color[c * TP + p] = v;
+                        bgdot += opts.background[c] * v;
+                    }
+                    let va = dl_dalpha.map_or(0.0, |a| a[pix]);
+                    // alpha = 1 − T_final and C += T_final·bg both scale with T_final.
+                    v_alpha_eff[p] = tfin[tile * TP + p] * (va - bgdot);
+                }
+            }
+            let tin = TileGradIn {
+                x0: x0 as u32,
+                y0: y0 as u32,
+                tfin: &tfin[tile * TP..(tile + 1) * TP],
+                last: &last[tile * TP..(tile + 1) * TP],
+                v_color: &v_color,
+                v_alpha_eff: &v_alpha_eff,
+            };
+            backward_tile(avx2, &tin, list, splats, acc);
+        });
+    }
+
+    fn reduce_accs(&mut self, n: usize) {
+        resize(&mut self.proj_grads, n, [0.0; 9]);
+        let (accs, rank_of) = (&self.accs, &self.bins.rank_of);
+        self.proj_grads
+            .par_chunks_mut(4096)
+            .enumerate()
+            .for_each(|(ci, out)| {
+                let base = ci * 4096;
+                for (j, o) in out.iter_mut().enumerate() {
+                    let mut s = [0.0f32; 9];
+                    let rank = rank_of[base + j];
+                    if rank != u32::MAX {
+                        for a in accs {
+                            for (sk, ak) in s.iter_mut().zip(&a[rank as usize]) {
+                                *sk += ak;
+                            }
+                        }
+                    }
+                    *o = s;
+                }
+            });
+    }
+
+    fn project_backward(
+        &self,
+        g: &Gaussians,
+        cam: &Camera,
+        opts: &RenderOptions,
+        grads: &mut Gradients,
+    ) {
+        let n = g.len();
+        let cstride = match g.colors {
+            Colors::Sh { num_coeffs, .. } => num_coeffs * 3,
+            Colors::Rgb(_) => 3,
+        };
+        resize(&mut grads.means, n * 3, 0.0);
+        resize(&mut grads.quats, n * 4, 0.0);
+        resize(&mut grads.scales, n * 3, 0.0);
+        resize(&mut grads.opacity_logits, n, 0.0);
+        resize(&mut grads.colors, n * cstride, 0.0);
+        resize(&mut grads.means2d, n, [0.0; 2]);
+        let ci = CamInfo::new(cam, opts);
+        let (proj, pgs) = (&self.proj, &self.proj_grads);
+        grads
+            .means
+            .par_chunks_mut(3)
+            .zip(grads.quats.par_chunks_mut(4))
+            .zip(grads.scales.par_chunks_mut(3))
+            .zip(grads.opacity_logits.par_iter_mut())
+            .zip(grads.colors.par_chunks_mut(cstride))
+            .zip(grads.means2d.par_iter_mut())
+            .enumerate()
+            .for_each(|(i, (((((mean, quat), scale), logit), color), m2))| {
+                let s = &pgs[i];
+                *m2 = [s[0], s[1]];
+                if proj[i].radii[0] <= 0 {
+                    mean.fill(0.0);
+                    quat.fill(0.0);
+                    scale.fill(0.0);
+                    *logit = 0.0;
+                    color.fill(0.0);
+                    return;
+                }
+                let pg = ProjGrad {
+                    mean2d: [s[0], s[1]],
+                    conic: [s[2], s[3], s[4]],
+                    rgb: [s[5], s[6], s[7]],
+                    opacity: s[8],
+                };
+                let out = GaussGradMut {
+                    mean,
+                    quat,
+                    scale,
+                    logit,
+                    color,
+                };
+                project_vjp(g, i, &ci, &pg, out);
+            });
+    }
+}
+
+fn tile_ctx(tile: usize, tiles_x: usize, cam: &Camera, opts: &RenderOptions) -> TileCtx {
+    let (tx, ty) = (tile % tiles_x, tile / tiles_x);
+    let (x0, y0) = ((tx * TS) as u32, (ty * TS) as u32);
+    TileCtx {
+        x0,
+        y0,
+        cols: (cam.width - x0).min(TS as u32) as usize,
+        rows: (cam.height - y0).min(TS as u32) as usize,
+        k: opts.topk,
+        bg: opts.background,
+    }
+}
+
+/// Sets `v` to `len` copies of `fill`, reusing its allocation.
+fn resize<T: Clone>(v: &mut Vec<T>, len: usize, fill: T) {
+    v.clear();
+    v.resize(len, fill);
+}

@@ -1,0 +1,312 @@
+//! Checkpoints of a run: `RUN/checkpoints/iter_NNNNNNN/` holding the canonical Gaussians as
+//! a 3DGS PLY, everything else that evolves (field weights, Adam moments and steps,
+//! densification statistics, epoch order, RNG position) as safetensors, and the resolved
+//! config. A checkpoint is written in a hidden folder and renamed into place, then
+//! `RUN/checkpoints/latest` is replaced atomically, so an interrupted save is never "latest".
+
+use crate::adam::Adam;
+use crate::config::TrainConfig;
+use crate::error::{Result, TrainError};
+use crate::field::DeformField;
+use crate::io::{atomic_write, create_dir_all};
+use crate::model::{GaussianModel, ROWS};
+use crate::state::{DensifyStats, GaussianState};
+use crate::trainer::Trainer;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use safetensors::{Dtype, SafeTensors};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+const FORMAT: &str = "semdynreg-train-1";
+const GROUPS: [&str; 5] = ["means", "quats", "log_scales", "opacity", "sh"];
+pub const PLY_NAME: &str = "point_cloud.ply";
+pub const STATE_NAME: &str = "state.safetensors";
+pub const CONFIG_NAME: &str = "config.toml";
+
+fn f32_bytes(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// Serializes everything but the Gaussians' parameters (those go to the PLY).
+fn state_bytes(tr: &Trainer) -> Result<Vec<u8>> {
+    let st = &tr.state;
+    let n = st.len();
+    let mut tensors: Vec<(String, Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
+    let mut f = |name: String, shape: Vec<usize>, v: &[f32]| {
+        tensors.push((name, Dtype::F32, shape, f32_bytes(v)))
+    };
+    f(
+        "field.params".into(),
+        vec![tr.field.mlp.params.len()],
+        &tr.field.mlp.params,
+    );
+    f(
+        "field.adam.m".into(),
+        vec![tr.field_adam.m.len()],
+        &tr.field_adam.m,
+    );
+    f(
+        "field.adam.v".into(),
+        vec![tr.field_adam.v.len()],
+        &tr.field_adam.v,
+    );
+    for ((a, g), r) in st.adam.iter().zip(GROUPS).zip(ROWS) {
+        f(format!("adam.{g}.m"), vec![n, r], &a.m);
+        f(format!("adam.{g}.v"), vec![n, r], &a.v);
+    }
+    f("stats.grad_accum".into(), vec![n], &st.stats.grad_accum);
+    f("stats.denom".into(), vec![n], &st.stats.denom);
+    f("stats.max_radii".into(), vec![n], &st.stats.max_radii);
+    let order: Vec<u8> = tr.order.iter().flat_map(|x| x.to_le_bytes()).collect();
+    tensors.push((
+        "epoch.order".into(),
+        Dtype::U32,
+        vec![tr.order.len()],
+        order,
+    ));
+    tensors.push((
+        "rng.seed".into(),
+        Dtype::U8,
+        vec![32],
+        tr.rng.get_seed().to_vec(),
+    ));
+    let mut meta = HashMap::new();
+    meta.insert("format".to_string(), FORMAT.to_string());
+    meta.insert("iteration".to_string(), tr.iteration.to_string());
+    meta.insert("sh_degree".to_string(), st.model.sh_degree.to_string());
+    meta.insert("cursor".to_string(), tr.cursor.to_string());
+    meta.insert("extent".to_string(), tr.extent.to_string());
+    meta.insert("rng.stream".to_string(), tr.rng.get_stream().to_string());
+    meta.insert(
+        "rng.word_pos".to_string(),
+        tr.rng.get_word_pos().to_string(),
+    );
+    meta.insert(
+        "field.adam.step".to_string(),
+        tr.field_adam.step.to_string(),
+    );
+    let steps: Vec<String> = st.adam.iter().map(|a| a.step.to_string()).collect();
+    meta.insert("adam.steps".to_string(), steps.join(","));
+    let views: Vec<(String, safetensors::tensor::TensorView)> = tensors
+        .iter()
+        .map(|(name, dt, shape, data)| {
+            let v = safetensors::tensor::TensorView::new(*dt, shape.clone(), data)
+                .expect("sizes match by construction");
+            (name.clone(), v)
+        })
+        .collect();
+    safetensors::serialize(views, Some(meta))
+        .map_err(|e| TrainError::Data(format!("safetensors: {e}")))
+}
+
+/// Writes a checkpoint of `tr` under `run/checkpoints/` and points `latest` at it; keeps the
+/// newest `tr.cfg.log.keep_checkpoints`. Returns its folder.
+pub fn save(tr: &Trainer, run: &Path) -> Result<PathBuf> {
+    let root = run.join("checkpoints");
+    create_dir_all(&root)?;
+    let name = format!("iter_{:07}", tr.iteration);
+    let tmp = root.join(format!(".{name}.tmp"));
+    if tmp.exists() {
+        std::fs::remove_dir_all(&tmp).map_err(|e| TrainError::io(&tmp, e))?;
+    }
+    create_dir_all(&tmp)?;
+    crate::ply::write(&tmp.join(PLY_NAME), &tr.state.model)?;
+    atomic_write(&tmp.join(STATE_NAME), &state_bytes(tr)?)?;
+    atomic_write(&tmp.join(CONFIG_NAME), tr.cfg.to_toml().as_bytes())?;
+    let dst = root.join(&name);
+    if dst.exists() {
+        std::fs::remove_dir_all(&dst).map_err(|e| TrainError::io(&dst, e))?;
+    }
+    std::fs::rename(&tmp, &dst).map_err(|e| TrainError::io(&dst, e))?;
+    atomic_write(&root.join("latest"), name.as_bytes())?;
+    prune_old(&root, &name, tr.cfg.log.keep_checkpoints);
+    Ok(dst)
+}
+
+/// Removes all but the newest `keep` checkpoints (never `current`); failures only log.
+fn prune_old(root: &Path, current: &str, keep: usize) {
+    let Ok(rd) = std::fs::read_dir(root) else {
+        return;
+    };
+    let mut names: Vec<String> = rd
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.starts_with("iter_"))
+        .collect();
+    names.sort();
+    let excess = names.len().saturating_sub(keep.max(1));
+    for n in names.into_iter().take(excess).filter(|n| n != current) {
+        if let Err(e) = std::fs::remove_dir_all(root.join(&n)) {
+            tracing::warn!("could not remove old checkpoint {n}: {e}");
+        }
+    }
+}
+
+/// Folder of the latest checkpoint of a run.
+pub fn latest(run: &Path) -> Result<PathBuf> {
+    let p = run.join("checkpoints").join("latest");
+    let name = std::fs::read_to_string(&p).map_err(|e| TrainError::io(&p, e))?;
+    let dir = run.join("checkpoints").join(name.trim());
+    if !dir.is_dir() {
+        return Err(TrainError::Checkpoint {
+            path: p,
+            problem: format!("names `{}`, which does not exist", name.trim()),
+        });
+    }
+    Ok(dir)
+}
+
+/// Parsed `state.safetensors`.
+struct StateFile<'a> {
+    st: SafeTensors<'a>,
+    meta: HashMap<String, String>,
+    path: PathBuf,
+}
+
+impl StateFile<'_> {
+    fn err(&self, problem: impl Into<String>) -> TrainError {
+        TrainError::Checkpoint {
+            path: self.path.clone(),
+            problem: problem.into(),
+        }
+    }
+
+    fn meta<T: std::str::FromStr>(&self, key: &str) -> Result<T> {
+        let v = self
+            .meta
+            .get(key)
+            .ok_or_else(|| self.err(format!("metadata `{key}` missing")))?;
+        v.parse()
+            .map_err(|_| self.err(format!("metadata `{key}` = `{v}` is not valid")))
+    }
+
+    fn bytes(&self, name: &str, dtype: Dtype, len: usize) -> Result<Vec<u8>> {
+        let t = self
+            .st
+            .tensor(name)
+            .map_err(|_| self.err(format!("tensor `{name}` missing")))?;
+        let n: usize = t.shape().iter().product();
+        if t.dtype() != dtype || n != len {
+            return Err(self.err(format!(
+                "tensor `{name}` is {:?} {:?}, expected {dtype:?} with {len} elements",
+                t.dtype(),
+                t.shape()
+            )));
+        }
+        Ok(t.data().to_vec())
+    }
+
+    /// An f32 tensor of `len` elements, all finite.
+    fn f32s(&self, name: &str, len: usize) -> Result<Vec<f32>> {
+        let b = self.bytes(name, Dtype::F32, len)?;
+        let v: Vec<f32> = b
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
+            .collect();
+        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+            return Err(self.err(format!(
+                "tensor `{name}` has a non-finite value at element {i}"
+            )));
+        }
+        Ok(v)
+    }
+}
+
+fn read_config(dir: &Path) -> Result<TrainConfig> {
+    TrainConfig::from_toml_file(&dir.join(CONFIG_NAME))
+}
+
+/// The model, field and iteration of a checkpoint (for render/eval/export).
+pub fn load_model(dir: &Path) -> Result<(TrainConfig, GaussianModel, DeformField, u32)> {
+    let cfg = read_config(dir)?;
+    let mut model = crate::ply::read(&dir.join(PLY_NAME))?;
+    let path = dir.join(STATE_NAME);
+    let bytes = crate::io::read(&path)?;
+    let sf = parse_state(&bytes, &path)?;
+    model.sh_degree = sf.meta("sh_degree")?;
+    if model.sh_degree > 3 {
+        return Err(sf.err("sh_degree > 3"));
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let mut field = DeformField::new(&cfg.field, &mut rng);
+    field.mlp.params = sf.f32s("field.params", field.mlp.num_params())?;
+    Ok((cfg, model, field, sf.meta("iteration")?))
+}
+
+fn parse_state<'a>(bytes: &'a [u8], path: &Path) -> Result<StateFile<'a>> {
+    let bad = |e: safetensors::SafeTensorError| TrainError::Checkpoint {
+        path: path.to_path_buf(),
+        problem: format!("not a readable safetensors file: {e}"),
+    };
+    let (_, m) = SafeTensors::read_metadata(bytes).map_err(bad)?;
+    let meta = m.metadata().clone().unwrap_or_default();
+    let st = SafeTensors::deserialize(bytes).map_err(bad)?;
+    let sf = StateFile {
+        st,
+        meta,
+        path: path.to_path_buf(),
+    };
+    let format: String = sf.meta("format")?;
+    if format != FORMAT {
+        return Err(sf.err(format!("format `{format}`, expected `{FORMAT}`")));
+    }
+    Ok(sf)
+}
+
+/// Rebuilds a trainer from a checkpoint folder so that training continues bit-identically.
+pub fn load_trainer(dir: &Path, dataset: scene::Dataset) -> Result<Trainer> {
+    let (cfg, model, field, iteration) = load_model(dir)?;
+    let path = dir.join(STATE_NAME);
+    let bytes = crate::io::read(&path)?;
+    let sf = parse_state(&bytes, &path)?;
+    let n = model.len();
+    let mut seed = [0u8; 32];
+    seed.copy_from_slice(&sf.bytes("rng.seed", Dtype::U8, 32)?);
+    let mut rng = ChaCha8Rng::from_seed(seed);
+    rng.set_stream(sf.meta("rng.stream")?);
+    rng.set_word_pos(sf.meta("rng.word_pos")?);
+    let extent: f32 = sf.meta("extent")?;
+    let mut tr = Trainer::assemble(cfg, dataset, model.clone(), field, rng, extent);
+    tr.iteration = iteration;
+    let p = tr.field.mlp.num_params();
+    tr.field_adam = Adam {
+        m: sf.f32s("field.adam.m", p)?,
+        v: sf.f32s("field.adam.v", p)?,
+        step: sf.meta("field.adam.step")?,
+    };
+    let steps: String = sf.meta("adam.steps")?;
+    let steps: Vec<u64> = steps.split(',').filter_map(|s| s.parse().ok()).collect();
+    if steps.len() != 5 {
+        return Err(sf.err("metadata `adam.steps` must list 5 integers"));
+    }
+    let mut state = GaussianState::new(model);
+    for (((a, g), r), s) in state.adam.iter_mut().zip(GROUPS).zip(ROWS).zip(steps) {
+        a.m = sf.f32s(&format!("adam.{g}.m"), n * r)?;
+        a.v = sf.f32s(&format!("adam.{g}.v"), n * r)?;
+        a.step = s;
+    }
+    state.stats = DensifyStats {
+        grad_accum: sf.f32s("stats.grad_accum", n)?,
+        denom: sf.f32s("stats.denom", n)?,
+        max_radii: sf.f32s("stats.max_radii", n)?,
+    };
+    tr.state = state;
+    let len = sf
+        .st
+        .tensor("epoch.order")
+        .map(|t| t.shape().iter().product())
+        .unwrap_or(0);
+    tr.order = sf
+        .bytes("epoch.order", Dtype::U32, len)?
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
+        .collect();
+    tr.cursor = sf.meta("cursor")?;
+    let n_train = tr.dataset.train.len() as u32;
+    if tr.cursor > tr.order.len() || tr.order.iter().any(|&i| i >= n_train) {
+        return Err(sf.err(format!(
+            "epoch order does not fit the data set's {n_train} training frames"
+        )));
+    }
+    Ok(tr)
+}

@@ -1,0 +1,55 @@
+//! Typed errors of the trainer. Each variant names the file or field involved so that the
+//! CLI's message says what to fix.
+
+use std::path::PathBuf;
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum TrainError {
+    #[error("invalid config value `{field}`: {problem}")]
+    Config { field: String, problem: String },
+    #[error("cannot parse config {path}: {message}")]
+    ConfigParse { path: PathBuf, message: String },
+    #[error("I/O error on {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("bad PLY file {path}: {problem}")]
+    Ply { path: PathBuf, problem: String },
+    #[error("bad checkpoint {path}: {problem}")]
+    Checkpoint { path: PathBuf, problem: String },
+    #[error("buffer `{name}` has length {got}, expected {expected}")]
+    Length {
+        name: &'static str,
+        got: usize,
+        expected: usize,
+    },
+    #[error("training diverged at iteration {iteration}: {what} is not finite")]
+    NonFinite { iteration: u32, what: String },
+    #[error("deformation hook failed: {0}")]
+    Hook(String),
+    #[error("data set problem: {0}")]
+    Data(String),
+    #[error("rasterizer: {0}")]
+    Splat(#[from] splat::SplatError),
+}
+
+impl TrainError {
+    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        TrainError::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    pub(crate) fn config(field: &str, problem: impl Into<String>) -> Self {
+        TrainError::Config {
+            field: field.to_string(),
+            problem: problem.into(),
+        }
+    }
+}
+
+pub type Result<T> = std::result::Result<T, TrainError>;

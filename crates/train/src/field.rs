@@ -1,0 +1,104 @@
+//! The deformation field (Deformable-3DGS): (detached canonical mean, t) → (δx, δr, δs),
+//! evaluated on a chosen subset of Gaussians (all, or those that can reach the view).
+
+use crate::config::FieldConfig;
+use crate::encoding::{encode_rows, encoded_dim};
+use crate::mlp::{Mlp, MlpCache};
+use rand::Rng;
+
+/// Outputs of the field head: δx (3), δr (4), δs (3).
+pub const HEAD: usize = 10;
+
+/// Per-Gaussian deformation of one iteration, `N·3`, `N·4`, `N·3`; zero where the field
+/// was not evaluated. The same layout carries `dL/dδ` into [`DeformField::backward`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DeformOutput {
+    pub dx: Vec<f32>,
+    pub dr: Vec<f32>,
+    pub ds: Vec<f32>,
+}
+
+impl DeformOutput {
+    /// Resizes to `n` Gaussians and zeroes.
+    pub fn reset(&mut self, n: usize) {
+        for (v, k) in [(&mut self.dx, 3), (&mut self.dr, 4), (&mut self.ds, 3)] {
+            v.clear();
+            v.resize(n * k, 0.0);
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.dx.len() / 3
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.dx.is_empty()
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct DeformField {
+    pub cfg: FieldConfig,
+    pub mlp: Mlp,
+    cache: MlpCache,
+    enc: Vec<f32>,
+    d_out: Vec<f32>,
+    /// Gaussians evaluated by the last forward.
+    rows: Vec<u32>,
+}
+
+impl DeformField {
+    pub fn new(cfg: &FieldConfig, rng: &mut impl Rng) -> Self {
+        let in_dim = encoded_dim(3, cfg.pos_freqs) + encoded_dim(1, cfg.time_freqs);
+        Self {
+            cfg: cfg.clone(),
+            mlp: Mlp::new(in_dim, cfg.width, cfg.depth, cfg.skip, HEAD, rng),
+            cache: MlpCache::default(),
+            enc: Vec::new(),
+            d_out: Vec::new(),
+            rows: Vec::new(),
+        }
+    }
+
+    /// Evaluates the field at time `t` for the Gaussians `rows` of `means` and scatters
+    /// the result into `out` (resized to N; zero elsewhere).
+    pub fn forward(&mut self, means: &[f32], t: f32, rows: &[u32], out: &mut DeformOutput) {
+        let n = means.len() / 3;
+        out.reset(n);
+        self.rows.clear();
+        self.rows.extend_from_slice(rows);
+        encode_rows(
+            means,
+            rows,
+            t,
+            self.cfg.pos_freqs,
+            self.cfg.time_freqs,
+            &mut self.enc,
+        );
+        self.mlp.forward(&self.enc, rows.len(), &mut self.cache);
+        for (o, &i) in self.cache.out.chunks_exact(HEAD).zip(rows) {
+            let i = i as usize;
+            out.dx[i * 3..i * 3 + 3].copy_from_slice(&o[0..3]);
+            out.dr[i * 4..i * 4 + 4].copy_from_slice(&o[3..7]);
+            out.ds[i * 3..i * 3 + 3].copy_from_slice(&o[7..10]);
+        }
+    }
+
+    /// Gradient of the field's parameters given `dL/dδ` for the last forward.
+    pub fn backward(&mut self, d_delta: &DeformOutput, grad: &mut Vec<f32>) {
+        self.d_out.resize(self.rows.len() * HEAD, 0.0);
+        for (o, &i) in self.d_out.chunks_exact_mut(HEAD).zip(&self.rows) {
+            let i = i as usize;
+            o[0..3].copy_from_slice(&d_delta.dx[i * 3..i * 3 + 3]);
+            o[3..7].copy_from_slice(&d_delta.dr[i * 4..i * 4 + 4]);
+            o[7..10].copy_from_slice(&d_delta.ds[i * 3..i * 3 + 3]);
+        }
+        self.mlp
+            .backward(&self.enc, &self.d_out, &mut self.cache, grad);
+    }
+
+    /// Gaussians evaluated by the last forward.
+    pub fn rows(&self) -> &[u32] {
+        &self.rows
+    }
+}

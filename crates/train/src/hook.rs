@@ -1,0 +1,36 @@
+//! The extension point for losses on the deformation (the SemDynReg regularizer): after
+//! the forward render, a hook sees δ and the render's per-pixel top-k contributors and adds
+//! its `dL/dδ`, which joins the photometric gradient before the field's backward pass.
+
+use crate::field::DeformOutput;
+use scene::Frame;
+
+/// What a hook sees of one iteration.
+pub struct HookContext<'a> {
+    /// 1-based iteration being computed.
+    pub iteration: u32,
+    /// Index of the view in `dataset.train`.
+    pub frame_index: usize,
+    pub frame: &'a Frame,
+    /// False during warm-up: δ is zero and no gradient reaches the field.
+    pub field_active: bool,
+    pub width: u32,
+    pub height: u32,
+    /// Per-pixel top-k of the training render (`H·W·k`, see `splat::ForwardOutput`).
+    pub topk: usize,
+    pub topk_ids: &'a [u32],
+    pub topk_weights: &'a [f32],
+    /// This iteration's deformation (zero for Gaussians the field was not evaluated on).
+    pub delta: &'a DeformOutput,
+}
+
+pub type HookError = Box<dyn std::error::Error + Send + Sync>;
+
+pub trait DeformHook {
+    /// Top-k the rasterizer should record for this hook (0 = none).
+    fn topk(&self) -> usize;
+
+    /// Adds `dL_extra/dδ` into `d_delta` (zeroed, sized like `ctx.delta`) and returns
+    /// `L_extra` (already weighted). Only used when `ctx.field_active`.
+    fn apply(&mut self, ctx: &HookContext, d_delta: &mut DeformOutput) -> Result<f32, HookError>;
+}

@@ -1,0 +1,38 @@
+//! `train`: the deformable 3D Gaussian Splatting trainer (Yang et al., CVPR 2024), the
+//! SemDynReg paper's baseline, on the CPU rasterizer of `splat` (DESIGN.md).
+//!
+//! Pieces, in data-flow order: [`model`] (raw canonical Gaussians) and [`state`] (with their
+//! Adam moments and densification statistics, kept row-aligned), [`init`], [`encoding`] +
+//! [`mlp`] = [`field`] (the deformation field), [`deform`] (δ applied and chained back),
+//! [`adam`], [`densify`], the training loop in [`trainer`], and [`checkpoint`]/[`ply`] on disk.
+
+pub mod adam;
+pub mod checkpoint;
+pub mod config;
+pub mod deform;
+pub mod densify;
+pub mod encoding;
+mod error;
+pub mod field;
+mod gemm_util;
+pub mod hook;
+pub mod init;
+mod io;
+pub mod loss;
+pub mod mlp;
+pub mod model;
+pub mod ply;
+pub mod regularizer;
+pub mod render;
+pub mod run;
+pub mod state;
+pub mod timing;
+pub mod trainer;
+mod visibility;
+
+pub use config::TrainConfig;
+pub use error::{Result, TrainError};
+pub use field::{DeformField, DeformOutput};
+pub use hook::{DeformHook, HookContext};
+pub use model::GaussianModel;
+pub use trainer::{StepStats, Trainer};

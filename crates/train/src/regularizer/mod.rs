@@ -1,0 +1,30 @@
+//! SemDynReg: object-level deformation regularization (paper Sec. 3.3–3.4, DESIGN.md items 5–6).
+//!
+//! Pure functions on flat `f32` buffers, independent of the rest of the trainer, so that they
+//! are tested alone and wired into the training step:
+//!
+//! 1. [`ObjectGroups::build`] turns the training render's per-pixel top-k ids and the view's
+//!    object-ID map into the groups `G_o` (sets of Gaussian indices);
+//! 2. [`evaluate`] computes `L_reg` over the groups for the field's `δx, δr, δs`, adds
+//!    `d(λ·L_reg)/dδ` into the trainer's gradient buffers before the field backward, and fills
+//!    per-object [`ObjectStats`] for the log;
+//! 3. [`RegConfig`] holds every constant and the activation schedule; [`Regularizer`] bundles
+//!    config and reused buffers into one call per training step;
+//! 4. [`consistency`] measures how far vehicle Gaussians stray from the ground-truth rigid
+//!    motion (the `compare` metric).
+
+pub mod config;
+pub mod consistency;
+pub mod error;
+pub mod grouping;
+pub mod loss;
+pub mod stats;
+pub mod step;
+
+pub use config::{RegConfig, REFERENCE_ITERS};
+pub use consistency::{ConsistencyAccumulator, ConsistencyReport, ObjectTrack};
+pub use error::RegError;
+pub use grouping::{Group, ObjectGroups, TopKView, BACKGROUND_ID, NO_GAUSSIAN};
+pub use loss::{evaluate, DeformGradMut, DeformView, RegLoss};
+pub use stats::ObjectStats;
+pub use step::Regularizer;

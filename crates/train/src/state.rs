@@ -1,0 +1,122 @@
+//! Gaussians with everything that must stay row-aligned with them: Adam moments per
+//! parameter group and the densification statistics. Every row operation goes through
+//! here so no buffer can fall out of step.
+
+use crate::adam::Adam;
+use crate::model::{GaussianModel, ROWS};
+
+/// Per-Gaussian statistics of 3DGS `add_densification_stats`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DensifyStats {
+    /// Σ over iterations where visible of the view-space gradient norm (NDC units).
+    pub grad_accum: Vec<f32>,
+    /// Number of iterations where visible.
+    pub denom: Vec<f32>,
+    /// Largest screen radius seen, pixels.
+    pub max_radii: Vec<f32>,
+}
+
+impl DensifyStats {
+    pub fn zeros(n: usize) -> Self {
+        Self {
+            grad_accum: vec![0.0; n],
+            denom: vec![0.0; n],
+            max_radii: vec![0.0; n],
+        }
+    }
+
+    /// Accumulates one iteration: `radii` and the gradient w.r.t. the projected means in
+    /// pixels, converted to 3DGS's NDC units (× W/2, H/2) before taking the norm.
+    pub fn add(&mut self, radii: &[[i32; 2]], means2d_grad: &[[f32; 2]], width: u32, height: u32) {
+        let (sx, sy) = (width as f32 * 0.5, height as f32 * 0.5);
+        for i in 0..self.denom.len() {
+            let r = radii[i][0].max(radii[i][1]);
+            if r > 0 {
+                let g = means2d_grad[i];
+                self.grad_accum[i] += ((g[0] * sx).powi(2) + (g[1] * sy).powi(2)).sqrt();
+                self.denom[i] += 1.0;
+                self.max_radii[i] = self.max_radii[i].max(r as f32);
+            }
+        }
+    }
+
+    fn arrays_mut(&mut self) -> [&mut Vec<f32>; 3] {
+        [&mut self.grad_accum, &mut self.denom, &mut self.max_radii]
+    }
+}
+
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct GaussianState {
+    pub model: GaussianModel,
+    /// Adam per group, in [`ROWS`] order (means, quats, log_scales, opacity, sh).
+    pub adam: [Adam; 5],
+    pub stats: DensifyStats,
+}
+
+impl GaussianState {
+    pub fn new(model: GaussianModel) -> Self {
+        let n = model.len();
+        let adam = ROWS.map(|r| Adam::zeros(n * r));
+        Self {
+            model,
+            adam,
+            stats: DensifyStats::zeros(n),
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.model.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.model.is_empty()
+    }
+
+    /// Keeps the Gaussians where `keep[i]`, with their moments and statistics.
+    pub fn retain(&mut self, keep: &[bool]) {
+        assert_eq!(keep.len(), self.len(), "mask length");
+        self.model.retain(keep);
+        for (a, r) in self.adam.iter_mut().zip(ROWS) {
+            a.retain(r, keep);
+        }
+        for s in self.stats.arrays_mut() {
+            crate::model::retain_rows(s, 1, keep);
+        }
+    }
+
+    /// Appends new Gaussians with zero moments and zero statistics.
+    pub fn append(&mut self, new: &GaussianModel) {
+        let k = new.len();
+        self.model.append(new);
+        for (a, r) in self.adam.iter_mut().zip(ROWS) {
+            a.append_zeros(k * r);
+        }
+        for s in self.stats.arrays_mut() {
+            s.resize(s.len() + k, 0.0);
+        }
+    }
+
+    /// Lengths of every buffer agree with N (checked after each densification in debug).
+    pub fn is_aligned(&self) -> bool {
+        let n = self.len();
+        let model_ok = self
+            .model
+            .arrays()
+            .iter()
+            .zip(ROWS)
+            .all(|(a, r)| a.len() == n * r);
+        let adam_ok = self
+            .adam
+            .iter()
+            .zip(ROWS)
+            .all(|(a, r)| a.m.len() == n * r && a.v.len() == n * r);
+        let stats_ok = [
+            &self.stats.grad_accum,
+            &self.stats.denom,
+            &self.stats.max_radii,
+        ]
+        .iter()
+        .all(|s| s.len() == n);
+        model_ok && adam_ok && stats_ok
+    }
+}

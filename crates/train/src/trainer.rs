@@ -1,0 +1,432 @@
+//! The training loop of Deformable-3DGS (`train.py`): one random training view per
+//! iteration, field off during warm-up, loss → rasterizer backward → deformation chain →
+//! field backward, Adam on Gaussians and field, then 3DGS density control.
+
+use crate::adam::{expon_lr, Adam, AdamHyper};
+use crate::config::TrainConfig;
+use crate::deform::{self, CanonicalGrads, Deformed};
+use crate::densify::{self, DensifyReport};
+use crate::error::{Result, TrainError};
+use crate::field::{DeformField, DeformOutput};
+use crate::hook::{DeformHook, HookContext};
+use crate::loss::{LossValue, PhotoLoss};
+use crate::model::{GaussianModel, SH_COEFFS};
+use crate::state::GaussianState;
+use crate::timing::{Phase, StepTimings};
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use scene::Dataset;
+use splat::{Colors, Gaussians, Gradients, Rasterizer, RenderOptions};
+
+/// What one iteration did.
+#[derive(Clone, Copy, Debug)]
+pub struct StepStats {
+    pub iteration: u32,
+    pub loss: LossValue,
+    /// Extra loss returned by the hook (0 without one).
+    pub extra_loss: f32,
+    pub psnr: f64,
+    pub num_gaussians: usize,
+    pub field_active: bool,
+    pub densify: Option<DensifyReport>,
+}
+
+/// Everything that evolves during training; saved whole by a checkpoint.
+pub struct Trainer {
+    pub cfg: TrainConfig,
+    pub dataset: Dataset,
+    pub state: GaussianState,
+    pub field: DeformField,
+    pub field_adam: Adam,
+    /// Completed iterations.
+    pub iteration: u32,
+    pub(crate) rng: ChaCha8Rng,
+    /// Current epoch's permutation of training frames and the position in it.
+    pub(crate) order: Vec<u32>,
+    pub(crate) cursor: usize,
+    pub extent: f32,
+    pub timings: StepTimings,
+    ws: Workspace,
+}
+
+/// Buffers reused every iteration (DESIGN.md: no allocation per iteration once warm).
+#[derive(Default)]
+struct Workspace {
+    raster: Rasterizer,
+    rows: Vec<u32>,
+    delta: DeformOutput,
+    extra: DeformOutput,
+    deformed: Deformed,
+    grads: Gradients,
+    canon: CanonicalGrads,
+    gt: Vec<f32>,
+    dl_dimage: Vec<f32>,
+    radii: Vec<[i32; 2]>,
+    /// Width and height of the last render.
+    size: (u32, u32),
+    field_grad: Vec<f32>,
+    loss: PhotoLoss,
+}
+
+impl Trainer {
+    /// Fresh run: Gaussians from the scene's point cloud (if any and enabled) or random,
+    /// field initialized, all from `seed`.
+    pub fn new(cfg: TrainConfig, dataset: Dataset, seed: u64) -> Result<Self> {
+        cfg.validate()?;
+        if dataset.train.is_empty() {
+            return Err(TrainError::Data(format!(
+                "{} has no training frames",
+                dataset.root.display()
+            )));
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let model = match (&dataset.point_cloud, cfg.init.use_point_cloud) {
+            (Some(pc), true) if !pc.is_empty() => {
+                let pos: Vec<f32> = pc.iter().flatten().copied().collect();
+                // The shipped clouds carry no colours here; grey as a neutral start.
+                crate::init::from_points(&pos, &vec![0.5; pos.len()], cfg.init.opacity)
+            }
+            _ => crate::init::random(&cfg.init, &mut rng),
+        };
+        let field = DeformField::new(&cfg.field, &mut rng);
+        let extent = dataset.scene_extent();
+        Ok(Self::assemble(cfg, dataset, model, field, rng, extent))
+    }
+
+    pub(crate) fn assemble(
+        cfg: TrainConfig,
+        dataset: Dataset,
+        model: GaussianModel,
+        field: DeformField,
+        rng: ChaCha8Rng,
+        extent: f32,
+    ) -> Self {
+        let field_adam = Adam::zeros(field.mlp.num_params());
+        Self {
+            cfg,
+            dataset,
+            state: GaussianState::new(model),
+            field,
+            field_adam,
+            iteration: 0,
+            rng,
+            order: Vec::new(),
+            cursor: 0,
+            extent,
+            timings: StepTimings::default(),
+            ws: Workspace::default(),
+        }
+    }
+
+    pub fn model(&self) -> &GaussianModel {
+        &self.state.model
+    }
+
+    /// Whether the field is applied at 1-based iteration `it` (Deformable-3DGS: from `warm_up`).
+    pub fn field_active_at(&self, it: u32) -> bool {
+        it >= self.cfg.field.warm_up
+    }
+
+    /// Metrics on the first `max_frames` test frames (0 = all), with the field applied once
+    /// training has passed the warm-up (before that it is untrained).
+    pub fn evaluate_test(&mut self, max_frames: usize) -> Result<crate::render::EvalReport> {
+        let active = self.iteration >= self.cfg.field.warm_up;
+        let frames = &self.dataset.test;
+        let k = if max_frames == 0 {
+            frames.len()
+        } else {
+            max_frames.min(frames.len())
+        };
+        let mut r = crate::render::Renderer::default();
+        r.evaluate(
+            &self.state.model,
+            active.then_some(&mut self.field),
+            &frames[..k],
+            self.dataset.background,
+        )
+    }
+
+    /// Next training frame: a fresh random permutation each epoch (3DGS `viewpoint_stack`).
+    fn next_frame(&mut self) -> usize {
+        if self.cursor >= self.order.len() {
+            self.order = (0..self.dataset.train.len() as u32).collect();
+            self.order.shuffle(&mut self.rng);
+            self.cursor = 0;
+        }
+        self.cursor += 1;
+        self.order[self.cursor - 1] as usize
+    }
+
+    /// One iteration without a hook.
+    pub fn step(&mut self) -> Result<StepStats> {
+        self.step_with(None)
+    }
+
+    /// One iteration; `hook` may add `dL/dδ` (and report a loss) before the field backward.
+    pub fn step_with(&mut self, mut hook: Option<&mut dyn DeformHook>) -> Result<StepStats> {
+        let it = self.iteration + 1;
+        let mut tm = StepTimings::default();
+        if it.is_multiple_of(self.cfg.sh.degree_interval)
+            && self.state.model.sh_degree < self.cfg.sh.max_degree
+        {
+            self.state.model.sh_degree += 1;
+        }
+        let fi = self.next_frame();
+        let active = self.field_active_at(it);
+        let topk = hook.as_ref().map_or(0, |h| h.topk());
+        self.forward_deform(fi, active, &mut tm);
+        let (loss, psnr, extra_loss) =
+            self.render_and_loss(fi, it, active, topk, &mut hook, &mut tm)?;
+        if !loss.total.is_finite() {
+            return Err(TrainError::NonFinite {
+                iteration: it,
+                what: "loss".into(),
+            });
+        }
+        self.backward(fi, active, &mut tm)?;
+        let densify = self.optimize_and_densify(it, active, &mut tm);
+        self.iteration = it;
+        self.timings.add(&tm);
+        Ok(StepStats {
+            iteration: it,
+            loss,
+            extra_loss,
+            psnr,
+            num_gaussians: self.state.len(),
+            field_active: active,
+            densify,
+        })
+    }
+
+    fn forward_deform(&mut self, fi: usize, active: bool, tm: &mut StepTimings) {
+        let ws = &mut self.ws;
+        let model = &self.state.model;
+        if active {
+            let t0 = std::time::Instant::now();
+            let frame = &self.dataset.train[fi];
+            let fc = &self.cfg.field;
+            crate::visibility::field_rows(
+                &model.means,
+                &frame.camera,
+                fc.visible_only,
+                fc.visible_margin,
+                &mut ws.rows,
+            );
+            self.field
+                .forward(&model.means, frame.time, &ws.rows, &mut ws.delta);
+            tm.record(Phase::FieldForward, t0);
+        }
+        let t0 = std::time::Instant::now();
+        deform::apply(model, active.then_some(&ws.delta), &mut ws.deformed);
+        tm.record(Phase::Deform, t0);
+    }
+
+    fn render_options(&self, topk: usize) -> RenderOptions {
+        RenderOptions {
+            background: self.dataset.background,
+            topk,
+            ..RenderOptions::default()
+        }
+    }
+
+    fn render_and_loss(
+        &mut self,
+        fi: usize,
+        it: u32,
+        active: bool,
+        topk: usize,
+        hook: &mut Option<&mut dyn DeformHook>,
+        tm: &mut StepTimings,
+    ) -> Result<(LossValue, f64, f32)> {
+        let opts = self.render_options(topk);
+        let ws = &mut self.ws;
+        let model = &self.state.model;
+        let frame = &self.dataset.train[fi];
+        let g = gaussians(model, &ws.deformed);
+        let t0 = std::time::Instant::now();
+        let out = ws.raster.forward(&g, &frame.camera, &opts)?;
+        tm.record(Phase::RasterForward, t0);
+        let t0 = std::time::Instant::now();
+        frame.image.to_f32_into(&mut ws.gt);
+        if ws.gt.len() != out.image.len() {
+            return Err(TrainError::Data(format!(
+                "image {} is {}×{} but its camera is {}×{}",
+                frame.file_path, frame.image.width, frame.image.height, out.width, out.height
+            )));
+        }
+        let loss = ws.loss.eval(
+            out.image,
+            &ws.gt,
+            out.width,
+            out.height,
+            self.cfg.loss.lambda_dssim,
+            &mut ws.dl_dimage,
+        );
+        let psnr = metrics::psnr(out.image, &ws.gt);
+        ws.radii.clear();
+        ws.radii.extend_from_slice(out.radii);
+        ws.size = (out.width, out.height);
+        tm.record(Phase::Loss, t0);
+        ws.extra.reset(model.len());
+        let mut extra_loss = 0.0;
+        if let Some(h) = hook.as_mut() {
+            let t0 = std::time::Instant::now();
+            let ctx = HookContext {
+                iteration: it,
+                frame_index: fi,
+                frame,
+                field_active: active,
+                width: out.width,
+                height: out.height,
+                topk,
+                topk_ids: out.topk_ids,
+                topk_weights: out.topk_weights,
+                delta: &ws.delta,
+            };
+            extra_loss = h
+                .apply(&ctx, &mut ws.extra)
+                .map_err(|e| TrainError::Hook(e.to_string()))?;
+            tm.record(Phase::Hook, t0);
+        }
+        Ok((loss, psnr, extra_loss))
+    }
+
+    fn backward(&mut self, fi: usize, active: bool, tm: &mut StepTimings) -> Result<()> {
+        let opts = self.render_options(0);
+        let ws = &mut self.ws;
+        let model = &self.state.model;
+        let frame = &self.dataset.train[fi];
+        let g = gaussians(model, &ws.deformed);
+        let t0 = std::time::Instant::now();
+        ws.raster
+            .backward(&g, &frame.camera, &opts, &ws.dl_dimage, None, &mut ws.grads)?;
+        tm.record(Phase::RasterBackward, t0);
+        let t0 = std::time::Instant::now();
+        deform::backward(
+            model,
+            &ws.grads.means,
+            &ws.grads.quats,
+            &ws.grads.scales,
+            &mut ws.canon,
+        );
+        tm.record(Phase::Deform, t0);
+        if active {
+            let t0 = std::time::Instant::now();
+            // δ enters additively: dL/dδ = dL/d(deformed) + the hook's extra term.
+            for (e, g) in [
+                (&mut ws.extra.dx, &ws.grads.means),
+                (&mut ws.extra.dr, &ws.grads.quats),
+                (&mut ws.extra.ds, &ws.grads.scales),
+            ] {
+                e.iter_mut().zip(g).for_each(|(a, b)| *a += b);
+            }
+            self.field.backward(&ws.extra, &mut ws.field_grad);
+            tm.record(Phase::FieldBackward, t0);
+        }
+        Ok(())
+    }
+
+    /// Adam on the field and Gaussians, then density control (3DGS `train.py` order). On
+    /// iterations that densify, 3DGS's new tensors have no `.grad`, so the Gaussian step is
+    /// skipped; after an opacity reset the opacity step is skipped. The field always steps.
+    fn optimize_and_densify(
+        &mut self,
+        it: u32,
+        active: bool,
+        tm: &mut StepTimings,
+    ) -> Option<DensifyReport> {
+        let t0 = std::time::Instant::now();
+        let c = &self.cfg;
+        let hp = AdamHyper {
+            beta1: c.lr.adam_beta1,
+            beta2: c.lr.adam_beta2,
+            eps: c.lr.adam_eps,
+        };
+        if active {
+            let lr = expon_lr(c.lr.field_init, c.lr.field_final, c.lr.field_max_steps, it);
+            self.field_adam
+                .step(&mut self.field.mlp.params, &self.ws.field_grad, hp, lr);
+        }
+        let d = c.densify.clone();
+        let in_densify = it < d.until;
+        let densify_now = in_densify && it > d.from && it.is_multiple_of(d.interval);
+        let white = self.dataset.background == [1.0; 3];
+        let reset_now =
+            in_densify && (it.is_multiple_of(d.opacity_reset_interval) || (white && it == d.from));
+        if !densify_now {
+            self.adam_gaussians(it, hp, !reset_now);
+        }
+        tm.record(Phase::Optimizer, t0);
+        let t0 = std::time::Instant::now();
+        let mut report = None;
+        if in_densify {
+            let (w, h) = self.ws.size;
+            self.state
+                .stats
+                .add(&self.ws.radii, &self.ws.grads.means2d, w, h);
+            if densify_now {
+                let prune_screen = it > d.screen_size_after;
+                report = Some(densify::densify_and_prune(
+                    &mut self.state,
+                    &d,
+                    self.extent,
+                    prune_screen,
+                    &mut self.rng,
+                ));
+            }
+            if reset_now {
+                densify::reset_opacity(&mut self.state, d.reset_opacity);
+            }
+        }
+        tm.record(Phase::Densify, t0);
+        report
+    }
+
+    fn adam_gaussians(&mut self, it: u32, hp: AdamHyper, step_opacity: bool) {
+        let c = &self.cfg.lr;
+        let s = &mut self.state;
+        let g = &self.ws;
+        let lr_means = expon_lr(
+            c.position_init * c.spatial_scale,
+            c.position_final * c.spatial_scale,
+            c.position_max_steps,
+            it,
+        );
+        let [a_means, a_quats, a_scales, a_opacity, a_sh] = &mut s.adam;
+        a_means.step(&mut s.model.means, &g.canon.means, hp, lr_means);
+        a_quats.step(&mut s.model.quats, &g.canon.quats, hp, c.rotation);
+        a_scales.step(&mut s.model.log_scales, &g.canon.log_scales, hp, c.scaling);
+        if step_opacity {
+            a_opacity.step(
+                &mut s.model.opacity_logits,
+                &g.grads.opacity_logits,
+                hp,
+                c.opacity,
+            );
+        }
+        let (dc, rest) = (c.sh_dc, c.sh_rest);
+        a_sh.step_rows(
+            &mut s.model.sh,
+            &g.grads.colors,
+            hp,
+            SH_COEFFS * 3,
+            move |k| if k < 3 { dc } else { rest },
+        );
+    }
+}
+
+/// The rasterizer's view of canonical colours/opacities with deformed geometry.
+pub fn gaussians<'a>(model: &'a GaussianModel, d: &'a Deformed) -> Gaussians<'a> {
+    Gaussians {
+        means: &d.means,
+        quats: &d.quats,
+        scales: &d.scales,
+        opacity_logits: &model.opacity_logits,
+        colors: Colors::Sh {
+            coeffs: &model.sh,
+            num_coeffs: SH_COEFFS,
+            degree: model.sh_degree,
+        },
+    }
+}

@@ -1,0 +1,89 @@
+//! Iteration-time breakdown at 480×360 on toycars scene1 (heavy; ignored by default):
+//! `CARGO_TARGET_DIR=... cargo test --release -p train --test perf -- --ignored --nocapture`
+//! (the test profile has opt-level 3 too). Prints ms per phase for each field option.
+
+use train::config::FieldConfig;
+use train::{TrainConfig, Trainer};
+
+fn scene_480() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = scene::toycars::ToycarsConfig {
+        frames: 16,
+        supersample: false,
+        ..Default::default()
+    };
+    scene::toycars::generate(&cfg, dir.path(), &|_, _| {}).unwrap();
+    dir
+}
+
+fn measure(name: &str, field: FieldConfig, dir: &std::path::Path, iters: u32) {
+    let ds = scene::load_dataset(dir, &scene::LoadOptions::default()).unwrap();
+    let mut cfg = TrainConfig {
+        field: FieldConfig {
+            warm_up: 0,
+            ..field
+        },
+        ..Default::default()
+    };
+    cfg.densify.from = 1_000_000; // measure at a fixed Gaussian count (100k random init)
+    cfg.densify.until = 0;
+    let mut tr = Trainer::new(cfg, ds, 0).unwrap();
+    for _ in 0..3 {
+        tr.step().unwrap();
+    }
+    tr.timings = Default::default();
+    let t0 = std::time::Instant::now();
+    for _ in 0..iters {
+        tr.step().unwrap();
+    }
+    let total = t0.elapsed().as_secs_f64() * 1e3 / iters as f64;
+    let parts: Vec<String> = tr
+        .timings
+        .per_iteration_ms()
+        .iter()
+        .map(|(k, v)| format!("{k} {v:.1}"))
+        .collect();
+    println!(
+        "{name}: N={} total {total:.1} ms/iter | {}",
+        tr.state.len(),
+        parts.join(", ")
+    );
+}
+
+#[test]
+#[ignore]
+fn iteration_breakdown_480x360() {
+    let dir = scene_480();
+    let iters: u32 = std::env::var("PERF_ITERS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(5);
+    let d = FieldConfig::default();
+    measure("default 4x64 visible", d.clone(), dir.path(), iters);
+    measure(
+        "4x64 all",
+        FieldConfig {
+            visible_only: false,
+            ..d.clone()
+        },
+        dir.path(),
+        iters,
+    );
+    measure(
+        "2x32 visible",
+        FieldConfig {
+            depth: 2,
+            width: 32,
+            skip: 0,
+            ..d.clone()
+        },
+        dir.path(),
+        iters,
+    );
+    measure(
+        "faithful 8x256",
+        FieldConfig::faithful(),
+        dir.path(),
+        iters.min(2),
+    );
+}

@@ -21,6 +21,7 @@ struct Cli {
 enum Command {
     // SUBCOMMANDS (one line each, alphabetical)
     Compare(cmd::compare::Args),
+    Demo(cmd::demo::Args),
     Eval(cmd::eval::Args),
     Export(cmd::export::Args),
     Metrics(cmd::metrics::Args),
@@ -43,6 +44,7 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         // DISPATCH (one arm each)
         Command::Compare(a) => cmd::compare::run(a),
+        Command::Demo(a) => cmd::demo::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Metrics(a) => cmd::metrics::run(a),

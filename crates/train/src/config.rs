@@ -19,6 +19,8 @@ pub struct TrainConfig {
     pub sh: ShConfig,
     pub loss: LossConfig,
     pub log: LogConfig,
+    /// The SemDynReg regularizer (paper Sec. 3.3–3.4); off unless enabled here or by `--reg`.
+    pub reg: crate::regularizer::RegConfig,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -136,6 +138,10 @@ impl Default for TrainConfig {
             sh: ShConfig::default(),
             loss: LossConfig::default(),
             log: LogConfig::default(),
+            reg: crate::regularizer::RegConfig {
+                enabled: false,
+                ..Default::default()
+            },
         }
     }
 }
@@ -288,6 +294,8 @@ impl TrainConfig {
         c.log.eval_interval = every(c.log.eval_interval);
         c.log.checkpoint_interval = every(c.log.checkpoint_interval);
         c.log.log_interval = every(c.log.log_interval);
+        c.reg.start_iter = at(c.reg.start_iter as u32) as u64;
+        c.reg.end_iter = at(c.reg.end_iter as u32) as u64;
         c.validate()?;
         Ok(c)
     }
@@ -405,6 +413,9 @@ impl TrainConfig {
         }
         nonzero("sh.degree_interval", self.sh.degree_interval as u64)?;
         unit("loss.lambda_dssim", self.loss.lambda_dssim)?;
+        self.reg
+            .validate()
+            .map_err(|e| TrainError::config("reg", e.to_string()))?;
         Ok(())
     }
 }

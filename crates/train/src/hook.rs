@@ -27,8 +27,9 @@ pub struct HookContext<'a> {
 pub type HookError = Box<dyn std::error::Error + Send + Sync>;
 
 pub trait DeformHook {
-    /// Top-k the rasterizer should record for this hook (0 = none).
-    fn topk(&self) -> usize;
+    /// Top-k the rasterizer should record for this hook at `iteration` (0 = none, which
+    /// keeps the forward pass free of top-k work outside the hook's active window).
+    fn topk(&self, iteration: u32) -> usize;
 
     /// Adds `dL_extra/dδ` into `d_delta` (zeroed, sized like `ctx.delta`) and returns
     /// `L_extra` (already weighted). Only used when `ctx.field_active`.

@@ -174,7 +174,7 @@ impl Trainer {
         }
         let fi = self.next_frame();
         let active = self.field_active_at(it);
-        let topk = hook.as_ref().map_or(0, |h| h.topk());
+        let topk = hook.as_ref().map_or(0, |h| h.topk(it));
         self.forward_deform(fi, active, &mut tm);
         let (loss, psnr, extra_loss) =
             self.render_and_loss(fi, it, active, topk, &mut hook, &mut tm)?;

@@ -1,5 +1,6 @@
 //! One module per subcommand.
 pub mod compare;
+pub mod demo;
 pub mod eval;
 pub mod export;
 pub mod metrics;

@@ -10,6 +10,8 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
+use train::hook::DeformHook;
+use train::regularizer::SemanticHook;
 use train::run::RunInfo;
 use train::{checkpoint, TrainConfig, Trainer};
 
@@ -37,6 +39,13 @@ pub struct Args {
     /// Continue the run in --out from its latest checkpoint.
     #[arg(long)]
     pub resume: bool,
+    /// Enable the SemDynReg regularizer (needs `SCENE/semantics/`, made by `semdynreg segment`);
+    /// overrides `reg.enabled` of the config.
+    #[arg(long, conflicts_with = "no_reg")]
+    pub reg: bool,
+    /// Train the baseline without the regularizer (the default unless the config enables it).
+    #[arg(long)]
+    pub no_reg: bool,
 }
 
 fn fresh(a: &Args) -> Result<Trainer> {
@@ -58,6 +67,9 @@ fn fresh(a: &Args) -> Result<Trainer> {
     };
     if let Some(n) = a.iters {
         cfg = cfg.rescaled(n)?;
+    }
+    if a.reg || a.no_reg {
+        cfg.reg.enabled = a.reg;
     }
     let scene = std::fs::canonicalize(scene_dir)
         .with_context(|| format!("scene folder {}", scene_dir.display()))?;
@@ -82,8 +94,10 @@ fn fresh(a: &Args) -> Result<Trainer> {
 }
 
 fn resumed(a: &Args) -> Result<Trainer> {
-    if a.config.is_some() || a.iters.is_some() {
-        bail!("--resume continues with the run's saved config; drop --config/--iters");
+    if a.config.is_some() || a.iters.is_some() || a.reg || a.no_reg {
+        bail!(
+            "--resume continues with the run's saved config; drop --config/--iters/--reg/--no-reg"
+        );
     }
     let info = RunInfo::load(&a.out)?;
     let dataset = info
@@ -131,8 +145,13 @@ pub fn run(a: Args) -> Result<()> {
     let pb = progress_bar(&tr);
     let start = Instant::now();
     let first = tr.iteration;
+    let mut hook = if tr.cfg.reg.enabled {
+        Some(SemanticHook::load(tr.cfg.reg.clone(), &tr.dataset)?)
+    } else {
+        None
+    };
     while tr.iteration < tr.cfg.iterations {
-        let st = tr.step()?;
+        let st = tr.step_with(hook.as_mut().map(|h| h as &mut dyn DeformHook))?;
         let it = st.iteration;
         pb.set_position(it as u64);
         pb.set_message(format!(
@@ -142,9 +161,14 @@ pub fn run(a: Args) -> Result<()> {
         let l = tr.cfg.log.clone();
         if l.log_interval > 0 && it % l.log_interval == 0 {
             let secs = start.elapsed().as_secs_f64();
-            let line = serde_json::json!({"iteration": it, "loss": st.loss.total, "l1": st.loss.l1, "ssim": st.loss.ssim,
+            let mut line = serde_json::json!({"iteration": it, "loss": st.loss.total, "l1": st.loss.l1, "ssim": st.loss.ssim,
                 "psnr": st.psnr, "num_gaussians": st.num_gaussians, "elapsed_s": secs,
                 "it_per_s": (it - first) as f64 / secs.max(1e-9)});
+            if let Some(h) = hook.as_ref().filter(|h| h.active_at(it)) {
+                // Per-object group sizes, deviations and skips (issue 6, item 1).
+                line["reg_loss"] = h.last_loss().weighted.into();
+                line["reg_objects"] = serde_json::to_value(h.stats())?;
+            }
             append_jsonl(&log, &line)?;
         }
         if l.eval_interval > 0 && it % l.eval_interval == 0 && !tr.dataset.test.is_empty() {

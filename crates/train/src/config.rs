@@ -7,6 +7,11 @@ use crate::error::{Result, TrainError};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+/// Smallest densification interval `--iters` rescales to (3DGS's own: 100 views).
+pub const MIN_DENSIFY_INTERVAL: u32 = 100;
+/// Smallest opacity-reset interval `--iters` rescales to.
+pub const MIN_OPACITY_RESET_INTERVAL: u32 = 1000;
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrainConfig {
@@ -271,8 +276,17 @@ impl TrainConfig {
         toml::to_string_pretty(self).expect("config serializes: plain numbers and bools only")
     }
 
-    /// Rescales every iteration count proportionally to a schedule of `iters` iterations
-    /// (`--iters`), so a short run keeps the shape of the 40k schedule.
+    /// Rescales the schedule to `iters` iterations (`--iters`), so a short run keeps the
+    /// shape of the 40k schedule: every milestone (warm-up, densification window, learning
+    /// rate decay, SH steps, regularizer window) moves proportionally. Two intervals are
+    /// windows of statistics rather than milestones and do not shrink below
+    /// [`MIN_DENSIFY_INTERVAL`] and [`MIN_OPACITY_RESET_INTERVAL`] (or their configured
+    /// values when those are smaller; the start of size pruning, tied to the first reset in
+    /// 3DGS, takes the latter floor too): the view-space gradient that decides densification
+    /// is a mean over the views seen since the last densification, and Gaussians need a few
+    /// hundred steps to recover from an opacity reset before the next one. Scaled
+    /// proportionally, a 3k run would densify every 8 steps and reset every 225, which
+    /// prunes 100k Gaussians to ~6k and leaves a blurred scene (docs/training.md).
     pub fn rescaled(&self, iters: u32) -> Result<Self> {
         if iters == 0 {
             return Err(TrainError::config("iterations", "must be ≥ 1"));
@@ -280,6 +294,7 @@ impl TrainConfig {
         let f = iters as f64 / self.iterations as f64;
         let at = |v: u32| (v as f64 * f).round() as u32;
         let every = |v: u32| if v == 0 { 0 } else { at(v).max(1) };
+        let window = |v: u32, floor: u32| if v == 0 { 0 } else { every(v).max(v.min(floor)) };
         let mut c = self.clone();
         c.iterations = iters;
         c.field.warm_up = at(c.field.warm_up);
@@ -287,9 +302,15 @@ impl TrainConfig {
         c.lr.field_max_steps = every(c.lr.field_max_steps);
         c.densify.from = at(c.densify.from);
         c.densify.until = at(c.densify.until);
-        c.densify.interval = every(c.densify.interval);
-        c.densify.screen_size_after = at(c.densify.screen_size_after);
-        c.densify.opacity_reset_interval = every(c.densify.opacity_reset_interval);
+        c.densify.interval = window(c.densify.interval, MIN_DENSIFY_INTERVAL);
+        // 3DGS starts the size pruning after the first opacity reset
+        // (`size_threshold = 20 if iteration > opacity_reset_interval`), so it takes the
+        // reset's floor too: pruning by world size at step 225 of a 3k run removes the random
+        // init (its scales are the neighbour spacing, ~0.1 for 20k points) before it adapts.
+        c.densify.screen_size_after =
+            window(c.densify.screen_size_after, MIN_OPACITY_RESET_INTERVAL);
+        c.densify.opacity_reset_interval =
+            window(c.densify.opacity_reset_interval, MIN_OPACITY_RESET_INTERVAL);
         c.sh.degree_interval = every(c.sh.degree_interval);
         c.log.eval_interval = every(c.log.eval_interval);
         c.log.checkpoint_interval = every(c.log.checkpoint_interval);
@@ -445,10 +466,20 @@ mod tests {
         assert_eq!(c.field.warm_up, 30);
         assert_eq!(c.densify.from, 5);
         assert_eq!(c.densify.until, 150);
-        assert_eq!(c.densify.interval, 1);
+        assert_eq!(c.densify.interval, MIN_DENSIFY_INTERVAL);
+        assert_eq!(c.densify.opacity_reset_interval, MIN_OPACITY_RESET_INTERVAL);
+        assert_eq!(c.densify.screen_size_after, MIN_OPACITY_RESET_INTERVAL);
         assert_eq!(c.lr.position_max_steps, 300);
         assert_eq!(c.sh.degree_interval, 10);
         assert!(TrainConfig::default().rescaled(0).is_err());
+        // Intervals configured below the floors stay as configured.
+        let mut small = TrainConfig::default();
+        small.densify.interval = 10;
+        assert_eq!(small.rescaled(400).unwrap().densify.interval, 10);
+        // A longer schedule scales the intervals up as usual.
+        let long = TrainConfig::default().rescaled(80_000).unwrap();
+        assert_eq!(long.densify.interval, 200);
+        assert_eq!(long.densify.opacity_reset_interval, 6000);
     }
 
     #[test]

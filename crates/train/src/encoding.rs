@@ -12,6 +12,27 @@ pub fn encoded_dim(dim: usize, freqs: usize) -> usize {
 fn encode_into(x: &[f32], freqs: usize, out: &mut [f32]) {
     let d = x.len();
     out[..d].copy_from_slice(x);
+    for (k, &v) in x.iter().enumerate() {
+        // One `sin_cos` per coordinate, then the double-angle identities for 2x, 4x, …:
+        // sin 2a = 2 sin a cos a, cos 2a = (cos a − sin a)(cos a + sin a). In f64 the
+        // error after 9 doublings is ~1e-13, far below f32 rounding of the argument 2⁹x
+        // that the reference (torch.sin on f32) itself incurs, and one libm call replaces
+        // `freqs` of them (see "Training" in docs/performance.md).
+        let (mut s, mut c) = (v as f64).sin_cos();
+        for f in 0..freqs {
+            let base = d * (1 + 2 * f);
+            out[base + k] = s as f32;
+            out[base + d + k] = c as f32;
+            (s, c) = (2.0 * s * c, (c - s) * (c + s));
+        }
+    }
+}
+
+/// The same encoding with one `sin_cos` per term, as Deformable-3DGS computes it: the
+/// reference the fast version is tested and timed against (`examples/encoding_speed.rs`).
+pub fn encode_reference(x: &[f32], freqs: usize, out: &mut [f32]) {
+    let d = x.len();
+    out[..d].copy_from_slice(x);
     for f in 0..freqs {
         let scale = (1u32 << f) as f32;
         let base = d * (1 + 2 * f);
@@ -21,6 +42,11 @@ fn encode_into(x: &[f32], freqs: usize, out: &mut [f32]) {
             out[base + d + k] = c;
         }
     }
+}
+
+/// One row of the encoding (`encoded_dim(x.len(), freqs)` values) into `out`.
+pub fn encode_one(x: &[f32], freqs: usize, out: &mut [f32]) {
+    encode_into(x, freqs, out)
 }
 
 /// Encodes the rows `idx` of `means (N·3)` with time `t` into `out` (`idx.len() × width`).
@@ -66,5 +92,23 @@ mod tests {
         assert_eq!(out[15], 0.25);
         assert!((out[16] - 0.25f32.sin()).abs() < 1e-6);
         assert!((out[17] - 0.25f32.cos()).abs() < 1e-6);
+    }
+
+    #[test]
+    fn doubling_recurrence_matches_direct_sin_cos() {
+        let means: Vec<f32> = (0..300).map(|i| (i as f32 * 0.731).sin() * 1.6).collect();
+        let idx: Vec<u32> = (0..100).collect();
+        let mut out = Vec::new();
+        encode_rows(&means, &idx, 0.7, 10, 6, &mut out);
+        let width = encoded_dim(3, 10) + encoded_dim(1, 6);
+        for (i, row) in out.chunks_exact(width).enumerate() {
+            for f in 0..10 {
+                for k in 0..3 {
+                    let a = means[i * 3 + k] as f64 * (1u32 << f) as f64;
+                    assert!((row[3 * (1 + 2 * f) + k] as f64 - a.sin()).abs() < 2e-7);
+                    assert!((row[3 * (2 + 2 * f) + k] as f64 - a.cos()).abs() < 2e-7);
+                }
+            }
+        }
     }
 }

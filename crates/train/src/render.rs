@@ -23,13 +23,23 @@ pub struct FrameMetrics {
     pub time: f32,
     pub psnr: f64,
     pub ssim: f64,
+    /// Present when the caller supplied an LPIPS scorer (`semdynreg eval` with weights).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lpips: Option<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MeanMetrics {
     pub psnr: f64,
     pub ssim: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lpips: Option<f64>,
 }
+
+/// An extra per-frame image metric (LPIPS), given the render and the ground truth as
+/// `H·W·3` RGB in [0, 1] and the size `(w, h)`. Lives outside this crate because its
+/// weights are found and loaded by the caller.
+pub type FrameScorer<'a> = &'a mut dyn FnMut(&[f32], &[f32], usize, usize) -> Result<f64>;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EvalReport {
@@ -80,13 +90,14 @@ impl Renderer {
         Ok(self.raster.forward(&g, cam, &opts)?.image.to_vec())
     }
 
-    /// PSNR and SSIM of every frame, rendered at its own time.
+    /// PSNR and SSIM (and `lpips`, when given) of every frame, rendered at its own time.
     pub fn evaluate(
         &mut self,
         model: &GaussianModel,
         mut field: Option<&mut DeformField>,
         frames: &[scene::Frame],
         background: [f32; 3],
+        mut lpips: Option<FrameScorer>,
     ) -> Result<EvalReport> {
         let mut out = Vec::with_capacity(frames.len());
         let mut ssim_ws = metrics::SsimWorkspace::new();
@@ -100,18 +111,29 @@ impl Renderer {
                 )));
             }
             let (w, h) = (fr.camera.width as usize, fr.camera.height as usize);
+            let lp = match lpips.as_mut() {
+                Some(score) => Some(score(&img, &gt, w, h)?),
+                None => None,
+            };
             out.push(FrameMetrics {
                 file_path: fr.file_path.clone(),
                 time: fr.time,
                 psnr: metrics::psnr(&img, &gt),
                 ssim: ssim_ws.ssim(&img, &gt, w, h) as f64,
+                lpips: lp,
             });
         }
         let n = out.len().max(1) as f64;
+        let lpips_mean = out
+            .iter()
+            .map(|f| f.lpips)
+            .sum::<Option<f64>>()
+            .map(|s| s / n);
         Ok(EvalReport {
             mean: MeanMetrics {
                 psnr: out.iter().map(|f| f.psnr).sum::<f64>() / n,
                 ssim: out.iter().map(|f| f.ssim).sum::<f64>() / n,
+                lpips: lpips_mean,
             },
             frames: out,
         })

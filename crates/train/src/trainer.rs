@@ -144,6 +144,7 @@ impl Trainer {
             active.then_some(&mut self.field),
             &frames[..k],
             self.dataset.background,
+            None,
         )
     }
 

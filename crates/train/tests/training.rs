@@ -15,6 +15,7 @@ fn train_psnr(tr: &mut Trainer) -> f64 {
         active.then_some(&mut tr.field),
         &frames,
         bg,
+        None,
     )
     .unwrap()
     .mean

@@ -23,6 +23,10 @@ pub struct Args {
     /// Training iterations of each run (the 40k schedule rescaled).
     #[arg(long, default_value_t = 3000)]
     pub iters: u32,
+    /// Random initial Gaussians (the 40k schedule's 100k is 5× slower per step at this size
+    /// for no gain in 3k steps; docs/training.md). Written to `OUT/demo.toml` for both runs.
+    #[arg(long, default_value_t = 20_000)]
+    pub points: usize,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Object-ID maps: `gt` (the scene's ground-truth instance masks: the default, since SAM
@@ -105,6 +109,9 @@ pub fn run(a: Args) -> Result<()> {
     }
     let source = id_maps(&scene_s, &a)?;
     println!("object-ID maps: {source}");
+    let config = a.out.join("demo.toml");
+    let toml = format!("[init]\nrandom_points = {}\n", a.points);
+    crate::report::io::write_atomic(&config, toml.as_bytes())?;
     run_self(&[
         s("compare"),
         s(&scene_s),
@@ -114,6 +121,8 @@ pub fn run(a: Args) -> Result<()> {
         s(a.iters),
         s("--seed"),
         s(a.seed),
+        s("--config"),
+        s(config.display()),
     ])?;
     println!("object-ID maps used for training: {source}");
     Ok(())

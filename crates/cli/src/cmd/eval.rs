@@ -1,5 +1,6 @@
-//! `semdynreg eval RUN [--split test]`: PSNR and SSIM of the latest checkpoint on a split,
-//! written atomically to `RUN/eval/metrics.json` (`{"mean": {...}, "frames": [...]}`).
+//! `semdynreg eval RUN [--split test]`: PSNR, SSIM and (when the LPIPS weights are found)
+//! LPIPS-AlexNet of the latest checkpoint on a split, written atomically to
+//! `RUN/eval/metrics.json` (`{"mean": {...}, "frames": [...]}`).
 
 use anyhow::{Context, Result};
 use std::path::PathBuf;
@@ -9,17 +10,37 @@ pub struct Args {
     pub run: PathBuf,
     #[arg(long, default_value = "test")]
     pub split: String,
+    /// Skip LPIPS even when its weights are in `$SEMDYNREG_WEIGHTS` (default `./weights`).
+    #[arg(long)]
+    pub no_lpips: bool,
 }
 
 pub fn run(a: Args) -> Result<()> {
     let mut loaded = super::render::LoadedRun::open(&a.run)?;
     let frames = loaded.split(&a.split)?.to_vec();
-    let report = loaded.evaluate(&frames)?;
+    let (net, lpips_text) = if a.no_lpips {
+        (None, "not computed (--no-lpips)".to_string())
+    } else {
+        crate::report::scorer::load_lpips()?
+    };
+    let mut score = net.as_ref().map(|n| {
+        move |x: &[f32], y: &[f32], w: usize, h: usize| -> train::Result<f64> {
+            n.distance(x, y, w, h)
+                .map(f64::from)
+                .map_err(|e| train::TrainError::Data(format!("LPIPS: {e}")))
+        }
+    });
+    let scorer = score.as_mut().map(|f| f as train::render::FrameScorer);
+    let report = loaded.evaluate(&frames, scorer)?;
     let out = a.run.join("eval").join("metrics.json");
     std::fs::create_dir_all(a.run.join("eval")).context("creating eval folder")?;
     scene::io::write_json(&out, &report).with_context(|| format!("writing {}", out.display()))?;
+    let lpips = match report.mean.lpips {
+        Some(v) => format!("LPIPS {v:.4}"),
+        None => format!("LPIPS {lpips_text}"),
+    };
     println!(
-        "{}: PSNR {:.3} SSIM {:.4} over {} frames → {}",
+        "{}: PSNR {:.3} SSIM {:.4} {lpips} over {} frames → {}",
         a.split,
         report.mean.psnr,
         report.mean.ssim,

@@ -1,5 +1,6 @@
 //! `semdynreg render RUN [--split test] [--time T]`: PNGs of a split's cameras from the
-//! latest checkpoint, each at its own time or all at time T, into `RUN/renders/<split>/`.
+//! latest checkpoint, each at its own time or all at time T, into `RUN/renders/<split>/`,
+//! named after the frame (`r_007.png`, or `r_007_t0.500.png` with `--time`).
 //! Also holds [`LoadedRun`], shared by `eval` and `export`.
 
 use anyhow::{bail, Context, Result};
@@ -55,13 +56,31 @@ impl LoadedRun {
         }
     }
 
-    pub fn evaluate(&mut self, frames: &[scene::Frame]) -> Result<EvalReport> {
+    pub fn evaluate(
+        &mut self,
+        frames: &[scene::Frame],
+        lpips: Option<train::render::FrameScorer>,
+    ) -> Result<EvalReport> {
         let bg = self.dataset.background;
         let active = self.iteration >= self.cfg.field.warm_up;
-        Ok(self
-            .renderer
-            .evaluate(&self.model, active.then_some(&mut self.field), frames, bg)?)
+        Ok(self.renderer.evaluate(
+            &self.model,
+            active.then_some(&mut self.field),
+            frames,
+            bg,
+            lpips,
+        )?)
     }
+}
+
+/// A render's file name: the frame's own name (`test/r_007.png` → `r_007`), so renders sit
+/// beside their ground truth by name; the split index when the path has no usable name.
+fn frame_stem(file_path: &str, index: usize) -> String {
+    Path::new(file_path.trim_end_matches(".png"))
+        .file_name()
+        .and_then(|n| n.to_str())
+        .filter(|n| !n.is_empty())
+        .map_or_else(|| format!("{index:04}"), str::to_string)
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -83,12 +102,24 @@ pub fn run(a: Args) -> Result<()> {
             .render(&r.model, active.then_some(&mut r.field), &fr.camera, t, bg)?;
         let png = scene::ImageU8::from_f32(fr.camera.width, fr.camera.height, &img);
         let name = match a.time {
-            Some(t) => format!("{i:04}_t{t:.3}.png"),
-            None => format!("{i:04}.png"),
+            Some(t) => format!("{}_t{t:.3}.png", frame_stem(&fr.file_path, i)),
+            None => format!("{}.png", frame_stem(&fr.file_path, i)),
         };
         png.save_png(&dir.join(&name))
             .with_context(|| format!("writing {name}"))?;
     }
     println!("{} images → {}", frames.len(), dir.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::frame_stem;
+
+    #[test]
+    fn renders_are_named_after_their_frame() {
+        assert_eq!(frame_stem("./test/r_007.png", 3), "r_007");
+        assert_eq!(frame_stem("test/r_007", 3), "r_007");
+        assert_eq!(frame_stem("", 3), "0003");
+    }
 }

@@ -79,12 +79,18 @@ fn window() -> [f32; TAPS] {
 pub struct SsimWorkspace {
     width: usize,
     height: usize,
-    /// Horizontally filtered a, b, a², b², ab; FWD planes per image row.
-    hfwd: Vec<f32>,
-    /// Backward seeds ∂S/∂(μa, Eaa, Eab); BWD planes per image row.
-    seeds: Vec<f32>,
-    /// Horizontally filtered seeds; BWD planes per image row.
+    /// Per-band scratch (ring buffer of filtered rows etc., see `ssim_band.rs`).
+    bands: Vec<f32>,
+    /// Horizontally filtered backward seeds ∂S/∂(μa, Eaa, Eab); BWD planes per image row.
     hseeds: Vec<f32>,
+}
+
+/// Rows per band: enough bands for every thread to get two (load balance), each at least 16
+/// rows (the ring's 10-row halo is recomputed per band) and at most 64.
+fn band_rows(height: usize) -> usize {
+    height
+        .div_ceil(2 * rayon::current_num_threads())
+        .clamp(16, 64)
 }
 
 impl SsimWorkspace {
@@ -93,14 +99,14 @@ impl SsimWorkspace {
         Self::default()
     }
 
-    fn resize(&mut self, width: usize, height: usize, grad: bool) {
+    fn resize(&mut self, width: usize, height: usize, band: usize, grad: bool) {
         self.width = width;
         self.height = height;
-        let plane = width * CH * height;
-        self.hfwd.resize(FWD * plane, 0.0);
+        let row = width * CH;
+        self.bands
+            .resize(height.div_ceil(band) * band::scratch_len(row), 0.0);
         if grad {
-            self.seeds.resize(BWD * plane, 0.0);
-            self.hseeds.resize(BWD * plane, 0.0);
+            self.hseeds.resize(BWD * row * height, 0.0);
         }
     }
 
@@ -111,7 +117,15 @@ impl SsimWorkspace {
     /// checked call).
     pub fn ssim(&mut self, a: &[f32], b: &[f32], width: usize, height: usize) -> f32 {
         check_len(a, b, width, height).unwrap_or_else(|e| panic!("{e}"));
-        self.forward(a, b, width, height, SsimVariant::Gs3d, false)
+        self.forward(
+            a,
+            b,
+            width,
+            height,
+            SsimVariant::Gs3d,
+            false,
+            band_rows(height),
+        )
     }
 
     /// SSIM with the chosen averaging, with input checks.
@@ -127,7 +141,7 @@ impl SsimWorkspace {
         if variant == SsimVariant::Skimage && (width < TAPS || height < TAPS) {
             return Err(SsimError::TooSmall { width, height });
         }
-        Ok(self.forward(a, b, width, height, variant, false))
+        Ok(self.forward(a, b, width, height, variant, false, band_rows(height)))
     }
 
     /// 3DGS SSIM of `a` against `b`, writing ∂SSIM/∂a into `grad_a` (overwritten, same
@@ -143,14 +157,46 @@ impl SsimWorkspace {
         height: usize,
         grad_a: &mut [f32],
     ) -> f32 {
+        self.ssim_with_grad_banded(a, b, width, height, grad_a, band_rows(height))
+    }
+
+    fn ssim_with_grad_banded(
+        &mut self,
+        a: &[f32],
+        b: &[f32],
+        width: usize,
+        height: usize,
+        grad_a: &mut [f32],
+        band: usize,
+    ) -> f32 {
         check_len(a, b, width, height).unwrap_or_else(|e| panic!("{e}"));
         check_len(grad_a, b, width, height).unwrap_or_else(|e| panic!("{e} (grad_a)"));
-        let s = self.forward(a, b, width, height, SsimVariant::Gs3d, true);
-        self.backward(a, b, grad_a);
+        let s = self.forward(a, b, width, height, SsimVariant::Gs3d, true, band);
+        self.backward(a, b, grad_a, band);
         s
     }
 
-    /// Fills `hfwd` and (if `grad`) `seeds`; returns the mean of the map.
+    fn frame<'a>(&self, a: &'a [f32], b: &'a [f32], variant: SsimVariant) -> band::Frame<'a> {
+        let (row, height) = (self.width * CH, self.height);
+        let (rows, cols) = match variant {
+            SsimVariant::Gs3d => (0..height, 0..row),
+            SsimVariant::Skimage => (RADIUS..height - RADIUS, RADIUS * CH..row - RADIUS * CH),
+        };
+        let count = rows.len() * cols.len();
+        band::Frame {
+            a,
+            b,
+            height,
+            row,
+            win: window(),
+            rows,
+            cols,
+            scale: (1.0 / count as f64) as f32,
+        }
+    }
+
+    /// Runs the fused forward per band (writing `hseeds` if `grad`); returns the mean map.
+    #[allow(clippy::too_many_arguments)]
     fn forward(
         &mut self,
         a: &[f32],
@@ -159,83 +205,49 @@ impl SsimWorkspace {
         height: usize,
         variant: SsimVariant,
         grad: bool,
+        band: usize,
     ) -> f32 {
-        self.resize(width, height, grad);
+        self.resize(width, height, band, grad);
         let row = width * CH;
         if row == 0 || height == 0 {
             return f32::NAN;
         }
-        let win = window();
-        self.hfwd
-            .par_chunks_mut(FWD * row)
-            .zip(a.par_chunks(row).zip(b.par_chunks(row)))
-            .for_each(|(out, (ar, br))| hpass_forward(ar, br, out, &win));
-
-        let (rows, cols) = match variant {
-            SsimVariant::Gs3d => (0..height, 0..row),
-            SsimVariant::Skimage => (RADIUS..height - RADIUS, RADIUS * CH..row - RADIUS * CH),
-        };
-        let count = (rows.len() * cols.len()) as f64;
-        let scale = (1.0 / count) as f32;
-        let hfwd = &self.hfwd;
-        let map_row = |i: usize, scratch: &mut Vec<f32>, seeds: Option<&mut [f32]>| {
-            vertical_map(
-                hfwd,
-                i,
-                height,
-                row,
-                &win,
-                scratch,
-                cols.clone(),
-                seeds,
-                scale,
-            )
-        };
+        let f = self.frame(a, b, variant);
+        let scratch = self.bands.par_chunks_mut(band::scratch_len(row));
         let total: f64 = if grad {
-            self.seeds
-                .par_chunks_mut(BWD * row)
+            scratch
+                .zip(self.hseeds[..BWD * row * height].par_chunks_mut(band * BWD * row))
                 .enumerate()
-                .map_init(Vec::new, |scr, (i, seeds)| map_row(i, scr, Some(seeds)))
+                .map(|(k, (scr, hs))| {
+                    band::band_forward(&f, k * band, hs.len() / (BWD * row), scr, Some(hs))
+                })
                 .sum()
         } else {
-            rows.into_par_iter()
-                .map_init(Vec::new, |scr, i| map_row(i, scr, None))
+            scratch
+                .take(height.div_ceil(band))
+                .enumerate()
+                .map(|(k, scr)| {
+                    let nrows = band.min(height - k * band);
+                    band::band_forward(&f, k * band, nrows, scr, None)
+                })
                 .sum()
         };
-        (total / count) as f32
+        (total / (f.rows.len() * f.cols.len()) as f64) as f32
     }
 
-    /// ∂S/∂a from the seeds written by `forward`.
-    fn backward(&mut self, a: &[f32], b: &[f32], grad_a: &mut [f32]) {
+    /// ∂S/∂a from the filtered seeds written by `forward`.
+    fn backward(&mut self, a: &[f32], b: &[f32], grad_a: &mut [f32], band: usize) {
         let row = self.width * CH;
-        let height = self.height;
-        let win = window();
-        self.hseeds
-            .par_chunks_mut(BWD * row)
-            .zip(self.seeds.par_chunks(BWD * row))
-            .for_each(|(out, src)| {
-                for q in 0..BWD {
-                    let (s, o) = (
-                        &src[q * row..(q + 1) * row],
-                        &mut out[q * row..(q + 1) * row],
-                    );
-                    hpass(s, o, &win);
-                }
-            });
-        let hseeds = &self.hseeds;
-        grad_a
-            .par_chunks_mut(row)
-            .zip(a.par_chunks(row).zip(b.par_chunks(row)))
+        if row == 0 || self.height == 0 {
+            return;
+        }
+        let f = self.frame(a, b, SsimVariant::Gs3d);
+        let hseeds = &self.hseeds[..BWD * row * self.height];
+        self.bands
+            .par_chunks_mut(band::scratch_len(row))
+            .zip(grad_a.par_chunks_mut(band * row))
             .enumerate()
-            .for_each_init(Vec::new, |scratch, (i, (g, (ar, br)))| {
-                scratch.resize(BWD * row, 0.0);
-                vertical_sum(hseeds, BWD, i, height, row, &win, scratch);
-                let (fm, rest) = scratch.split_at(row);
-                let (faa, fab) = rest.split_at(row);
-                for n in 0..row {
-                    g[n] = fm[n] + 2.0 * ar[n] * faa[n] + br[n] * fab[n];
-                }
-            });
+            .for_each(|(k, (scr, g))| band::band_grad(&f, hseeds, k * band, g, scr));
     }
 }
 
@@ -252,128 +264,6 @@ fn check_len(a: &[f32], b: &[f32], width: usize, height: usize) -> Result<(), Ss
         }
     }
     Ok(())
-}
-
-/// Clipped ranges for tap `k` on a row of `len` floats, with `stride` floats per tap step:
-/// destination `n` reads source `n + (k − RADIUS)·stride` when that lies in the row (zero
-/// padding outside). Returns (destination start, source start, count).
-fn tap_range(k: usize, len: usize, stride: usize) -> (usize, usize, usize) {
-    let off = (k as isize - RADIUS as isize) * stride as isize;
-    let lo = (-off).max(0);
-    let hi = len as isize - off.max(0);
-    if hi <= lo {
-        return (0, 0, 0);
-    }
-    (lo as usize, (lo + off) as usize, (hi - lo) as usize)
-}
-
-/// One row: horizontal filtering of a, b, a², b², ab into the FWD planes of `out`.
-fn hpass_forward(a: &[f32], b: &[f32], out: &mut [f32], win: &[f32; TAPS]) {
-    let row = a.len();
-    out.fill(0.0);
-    let (pa, rest) = out.split_at_mut(row);
-    let (pb, rest) = rest.split_at_mut(row);
-    let (paa, rest) = rest.split_at_mut(row);
-    let (pbb, pab) = rest.split_at_mut(row);
-    for (k, &wk) in win.iter().enumerate() {
-        let (lo, src, n) = tap_range(k, row, CH);
-        let hi = lo + n;
-        let (sa, sb) = (&a[src..src + n], &b[src..src + n]);
-        let (da, db) = (&mut pa[lo..hi], &mut pb[lo..hi]);
-        let (daa, dbb, dab) = (&mut paa[lo..hi], &mut pbb[lo..hi], &mut pab[lo..hi]);
-        for j in 0..n {
-            let (x, y) = (sa[j], sb[j]);
-            da[j] += wk * x;
-            db[j] += wk * y;
-            daa[j] += wk * x * x;
-            dbb[j] += wk * y * y;
-            dab[j] += wk * x * y;
-        }
-    }
-}
-
-/// One plane of one row: horizontal filtering of `src` into `out`.
-fn hpass(src: &[f32], out: &mut [f32], win: &[f32; TAPS]) {
-    let row = src.len();
-    out.fill(0.0);
-    for (k, &wk) in win.iter().enumerate() {
-        let (lo, s0, n) = tap_range(k, row, CH);
-        let s = &src[s0..s0 + n];
-        for (d, &x) in out[lo..lo + n].iter_mut().zip(s) {
-            *d += wk * x;
-        }
-    }
-}
-
-/// Vertical filtering at image row `i` of all `planes` planes of `buf` (row-major, `planes`
-/// planes of `row` floats per image row) into `out` (`planes × row` floats).
-fn vertical_sum(
-    buf: &[f32],
-    planes: usize,
-    i: usize,
-    height: usize,
-    row: usize,
-    win: &[f32; TAPS],
-    out: &mut [f32],
-) {
-    out.fill(0.0);
-    for (k, &wk) in win.iter().enumerate() {
-        let src_row = i as isize + k as isize - RADIUS as isize;
-        if src_row < 0 || src_row >= height as isize {
-            continue;
-        }
-        let base = src_row as usize * planes * row;
-        let src = &buf[base..base + planes * row];
-        for (d, &x) in out.iter_mut().zip(src) {
-            *d += wk * x;
-        }
-    }
-}
-
-/// SSIM map at image row `i` (vertical pass over `hfwd`), summed over `cols`; when `seeds` is
-/// given, also writes ∂S/∂(μa, Eaa, Eab) (`scale` = 1 / number of averaged values).
-#[allow(clippy::too_many_arguments)]
-fn vertical_map(
-    hfwd: &[f32],
-    i: usize,
-    height: usize,
-    row: usize,
-    win: &[f32; TAPS],
-    scratch: &mut Vec<f32>,
-    cols: std::ops::Range<usize>,
-    seeds: Option<&mut [f32]>,
-    scale: f32,
-) -> f64 {
-    scratch.resize((FWD + 1) * row, 0.0);
-    let (sums, maps) = scratch.split_at_mut(FWD * row);
-    vertical_sum(hfwd, FWD, i, height, row, win, sums);
-    let (ma, rest) = sums.split_at(row);
-    let (mb, rest) = rest.split_at(row);
-    let (eaa, rest) = rest.split_at(row);
-    let (ebb, eab) = rest.split_at(row);
-    // Branch-free loops over whole rows so that they vectorize; the map is summed afterwards.
-    match seeds {
-        None => {
-            for n in 0..row {
-                maps[n] = map_terms(ma[n], mb[n], eaa[n], ebb[n], eab[n]).0;
-            }
-        }
-        Some(s) => {
-            let (gm, rest) = s.split_at_mut(row);
-            let (gaa, gab) = rest.split_at_mut(row);
-            for n in 0..row {
-                let (mua, mub) = (ma[n], mb[n]);
-                let (map, a1, a2, ib1, ib2) = map_terms(mua, mub, eaa[n], ebb[n], eab[n]);
-                maps[n] = map;
-                // ∂map/∂μa, ∂map/∂Eaa, ∂map/∂Eab (see the module comment).
-                let inv = ib1 * ib2;
-                gm[n] = scale * (2.0 * mub * (a2 - a1) * inv + 2.0 * mua * map * (ib2 - ib1));
-                gaa[n] = scale * (-map * ib2);
-                gab[n] = scale * (2.0 * a1 * inv);
-            }
-        }
-    }
-    lane_sum(&maps[cols])
 }
 
 /// SSIM map value and its factors: (map, A1, A2, 1/B1, 1/B2) with A1 = 2μaμb + C1,
@@ -421,6 +311,9 @@ pub fn ssim_with_grad(
 pub fn ssim_skimage(a: &[f32], b: &[f32], width: usize, height: usize) -> Result<f32, SsimError> {
     SsimWorkspace::new().ssim_variant(a, b, width, height, SsimVariant::Skimage)
 }
+
+#[path = "ssim_band.rs"]
+mod band;
 
 #[cfg(test)]
 #[path = "ssim_tests.rs"]

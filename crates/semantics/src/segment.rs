@@ -17,7 +17,7 @@ use crate::relevance::{object_ids, DictionaryEmbeddings, RelevanceError};
 use crate::sam::{Sam, SamError};
 
 /// Canonical phrases of the relevance score (LERF).
-pub const CANONICAL: [&str; 4] = ["object", "things", "stuff", "texture"];
+pub const CANONICAL: [&str; 4] = crate::relevance::CANONICAL_PHRASES;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -244,11 +244,7 @@ impl ClipLabeler {
             )));
         }
         let model = ClipModel::load(path, &Default::default())?;
-        let prompts: Vec<&str> = dictionary.iter().map(String::as_str).collect();
-        let text = DictionaryEmbeddings {
-            prompts: model.encode_texts(&prompts)?,
-            canonical: model.encode_texts(&CANONICAL)?,
-        };
+        let text = model.encode_dictionary(dictionary)?;
         text.validate()?;
         Ok(Self { model, text, tau })
     }
@@ -261,14 +257,11 @@ impl ClipLabeler {
     ) -> Result<Vec<Option<u8>>, SegmentError> {
         let rgb = image::RgbImage::from_raw(img.width, img.height, img.data.clone())
             .ok_or_else(|| SegmentError::Input("image buffer smaller than its size".into()))?;
-        let size = self.model.image_size();
-        let mut feats = Vec::with_capacity(am.masks.len());
-        for k in 0..am.masks.len() {
-            let mask: Vec<bool> = am.labels.iter().map(|&l| l as usize == k).collect();
-            let crop = crate::clip::preprocess::masked_crop(&rgb, &mask, size as u32)?;
-            let batch = crate::clip::preprocess::batch_pixels(&[crop], size)?;
-            feats.extend(self.model.encode_images(&batch)?);
-        }
+        // One boolean mask per SAM mask, encoded in batches of `clip::MASK_BATCH` crops.
+        let masks: Vec<Vec<bool>> = (0..am.masks.len())
+            .map(|k| am.labels.iter().map(|&l| l as usize == k).collect())
+            .collect();
+        let feats = self.model.encode_masks(&rgb, &masks)?;
         Ok(object_ids(&feats, &self.text, self.tau)?)
     }
 }

@@ -3,10 +3,13 @@
 //!
 //!     SEMDYNREG_WEIGHTS=weights cargo test --release -p semantics --test sam_speed -- --ignored --nocapture
 //!
-//! Prints one JSON object: the measured single-core GEMM rate for the decoder's dominant
-//! product shape (the floor), encoder and decoder times, prompt counts, and for the adaptive
-//! mode the per-vehicle IoU (with GT labels) and the area-weighted best-match IoU of the full
-//! grid's masks.
+//! (`--release`: the `test` profile's debug assertions slow `gemm` ~7×, docs/performance.md.)
+//!
+//! Prints one JSON object: the measured GEMM rate for the decoder's dominant product shape and
+//! the decoder's floor at that rate (its FLOPs per prompt, `docs/performance.md`), encoder and
+//! decoder times — wall clock and process CPU time, the latter less sensitive to other jobs on
+//! a shared machine — prompt counts, and for the faster modes the per-vehicle IoU (with GT
+//! labels) and the area-weighted best-match IoU of the full grid's masks.
 
 mod sam_common;
 
@@ -18,6 +21,28 @@ use semantics::automask::{generate_from_embedding, AutoMasks, MaskGenConfig, Sam
 use semantics::sam::kernels::matmul;
 use semantics::sam::Sam;
 use semantics::segment::{labels_from_gt, paint_labels};
+
+/// Decoder FLOPs per prompt (docs/performance.md "Floor"): the two-way transformer, and the
+/// output upscaling over the 48×64 embedding cells a 480×360 frame covers, for upscaled prompts.
+const TRANSFORMER_FLOP: f64 = 0.86e9;
+const UPSCALE_FLOP: f64 = 0.61e9;
+
+/// User + system CPU seconds of this process so far (all threads), from /proc/self/stat
+/// (fields 14 and 15, in USER_HZ = 100 ticks per second on Linux); 0 where unavailable.
+fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    // The command name (field 2) may hold spaces; fields after its closing parenthesis.
+    let rest = stat.rsplit_once(')').map(|r| r.1).unwrap_or("");
+    let f: Vec<f64> = rest
+        .split_whitespace()
+        .skip(11)
+        .take(2)
+        .filter_map(|v| v.parse().ok())
+        .collect();
+    f.iter().sum::<f64>() / 100.0
+}
 
 /// GFLOP/s of the 4096×256×56 product (the folded attention shape), one thread per core.
 fn gemm_rate(threads: usize) -> f64 {
@@ -62,6 +87,9 @@ fn best_match_iou(reference: &AutoMasks, other: &AutoMasks) -> f64 {
 #[test]
 #[ignore]
 fn sam_speed_and_adaptive_quality() {
+    // SAFETY: the only test in this binary, run before it starts any thread of its own (as
+    // `semdynreg segment` does); the harness's threads do not touch the environment.
+    unsafe { semantics::sam::set_thread_count_env() };
     let Some(ckpt) = mobile_sam_path() else {
         return;
     };
@@ -75,9 +103,11 @@ fn sam_speed_and_adaptive_quality() {
     let (w, h) = (frame.image.width as usize, frame.image.height as usize);
     let sam = Sam::load(&ckpt).unwrap();
 
-    let t = Instant::now();
+    let (t, c) = (Instant::now(), cpu_seconds());
     let emb = sam.embed(&frame.image.data, h, w).unwrap();
-    let encode_s = t.elapsed().as_secs_f64();
+    let (encode_s, encode_cpu_s) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
+    let threads = rayon::current_num_threads();
+    let gemm_all = gemm_rate(threads);
     let mut runs = Vec::new();
     let mut full: Option<AutoMasks> = None;
     for sampling in [
@@ -92,13 +122,17 @@ fn sam_speed_and_adaptive_quality() {
             sampling,
             ..Default::default()
         };
-        let t = Instant::now();
+        let (t, c) = (Instant::now(), cpu_seconds());
         let am = generate_from_embedding(&sam, &emb, &cfg).unwrap();
-        let total_s = t.elapsed().as_secs_f64();
+        let (total_s, cpu_s) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
+        let flop = am.stats.prompts as f64 * TRANSFORMER_FLOP
+            + am.stats.upscaled_prompts as f64 * UPSCALE_FLOP;
+        let floor_s = flop / (gemm_all * 1e9);
         let iou = per_object_iou(&paint_labels(&am, &labels_from_gt(&am, &gt)), &gt, 3);
         let vs_full = full.as_ref().map(|f| best_match_iou(f, &am));
         runs.push(serde_json::json!({
-            "sampling": format!("{sampling:?}"), "masks_s": total_s, "stats": am.stats,
+            "sampling": format!("{sampling:?}"), "masks_s": total_s, "masks_cpu_s": cpu_s,
+            "decoder_floor_s": floor_s, "vs_floor": total_s / floor_s, "stats": am.stats,
             "final_masks": am.masks.len(), "vehicle_iou": iou, "full_grid_best_match_iou": vs_full,
         }));
         if full.is_none() {
@@ -106,9 +140,9 @@ fn sam_speed_and_adaptive_quality() {
         }
     }
     let report = serde_json::json!({
-        "image": [w, h], "threads": rayon::current_num_threads(),
-        "gemm_gflops_1thread": gemm_rate(1), "gemm_gflops_all": gemm_rate(rayon::current_num_threads()),
-        "encode_s": encode_s, "runs": runs,
+        "image": [w, h], "threads": threads, "gemm_gflops_1thread": gemm_rate(1),
+        "gemm_gflops_all_before": gemm_all, "gemm_gflops_all_after": gemm_rate(threads),
+        "encode_s": encode_s, "encode_cpu_s": encode_cpu_s, "runs": runs,
     });
     println!("{}", serde_json::to_string_pretty(&report).unwrap());
 }

@@ -280,3 +280,98 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write_png(path: &Path, w: u32, h: u32, seed: u32) {
+        let img = image::RgbImage::from_fn(w, h, |x, y| {
+            let v = (x * 7 + y * 13 + seed * 31) % 256;
+            image::Rgb([v as u8, (255 - v) as u8, ((v * 3) % 256) as u8])
+        });
+        img.save(path).unwrap();
+    }
+
+    fn args(a: &Path, b: &Path, crop: Option<BBox>, output: Option<PathBuf>) -> Args {
+        Args {
+            a: a.to_owned(),
+            b: b.to_owned(),
+            lpips: None,
+            no_lpips: true,
+            ssim: SsimArg::Gs3d,
+            crop,
+            json: false,
+            output,
+        }
+    }
+
+    #[test]
+    fn folder_mode_scores_same_named_files_and_writes_json() {
+        let dir = tempfile::tempdir().unwrap();
+        let (ra, rb) = (dir.path().join("renders"), dir.path().join("gt"));
+        std::fs::create_dir_all(&ra).unwrap();
+        std::fs::create_dir_all(&rb).unwrap();
+        // b.png identical in both folders, a.png differs; a non-image file is ignored.
+        write_png(&ra.join("b.png"), 40, 36, 1);
+        write_png(&rb.join("b.png"), 40, 36, 1);
+        write_png(&ra.join("a.png"), 40, 36, 2);
+        write_png(&rb.join("a.png"), 40, 36, 3);
+        std::fs::write(ra.join("notes.txt"), "x").unwrap();
+        let out = dir.path().join("report.json");
+        run(args(&ra, &rb, None, Some(out.clone()))).unwrap();
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+        let res = v["results"].as_array().unwrap();
+        assert_eq!(res.len(), 2);
+        assert_eq!(
+            (res[0]["name"].as_str(), res[1]["name"].as_str()),
+            (Some("a.png"), Some("b.png"))
+        );
+        assert!(res[0]["psnr"].as_f64().unwrap().is_finite());
+        assert!(res[0]["ssim"].as_f64().unwrap() < 0.99);
+        // Identical pair: PSNR +inf → null, SSIM 1; the mean PSNR is then null too.
+        assert!(res[1]["psnr"].is_null());
+        assert!((res[1]["ssim"].as_f64().unwrap() - 1.0).abs() < 1e-6);
+        assert!(v["mean"]["psnr"].is_null());
+        assert!(v["lpips_net"].is_null() && res[0]["lpips"].is_null());
+    }
+
+    #[test]
+    fn folder_mode_reports_a_missing_counterpart() {
+        let dir = tempfile::tempdir().unwrap();
+        let (ra, rb) = (dir.path().join("r"), dir.path().join("g"));
+        std::fs::create_dir_all(&ra).unwrap();
+        std::fs::create_dir_all(&rb).unwrap();
+        write_png(&ra.join("only.png"), 8, 8, 0);
+        let err = run(args(&ra, &rb, None, None)).unwrap_err().to_string();
+        assert!(
+            err.contains("only.png") && err.contains("no counterpart"),
+            "{err}"
+        );
+        let err = run(args(&ra, &ra.join("only.png"), None, None)).unwrap_err();
+        assert!(err.to_string().contains("both be files or both be folders"));
+    }
+
+    #[test]
+    fn crop_is_parsed_grown_and_reported() {
+        assert!(parse_bbox("1,2,0,4").is_err());
+        assert!(parse_bbox("1,2,3").unwrap_err().contains("x,y,w,h"));
+        let dir = tempfile::tempdir().unwrap();
+        let (pa, pb) = (dir.path().join("a.png"), dir.path().join("b.png"));
+        write_png(&pa, 64, 48, 4);
+        write_png(&pb, 64, 48, 5);
+        let out = dir.path().join("crop.json");
+        let bbox = parse_bbox("10, 5, 8, 8").unwrap();
+        run(args(&pa, &pb, Some(bbox), Some(out.clone()))).unwrap();
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+        let crop = &v["results"][0]["crop"];
+        // An 8×8 box is grown to the 32×32 minimum, staying inside the 64×48 image.
+        assert_eq!(
+            (crop["w"].as_u64(), crop["h"].as_u64()),
+            (Some(32), Some(32))
+        );
+        assert!(crop["y"].as_u64().unwrap() + 32 <= 48);
+    }
+}

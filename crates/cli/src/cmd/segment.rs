@@ -84,6 +84,9 @@ fn generator(a: &Args) -> MaskGenConfig {
 }
 
 pub fn run(a: Args) -> Result<()> {
+    // SAFETY: the dispatcher calls this first, before the command starts any thread (the
+    // progress bar's and rayon's come later), so nothing else touches the environment.
+    unsafe { semantics::sam::set_thread_count_env() };
     let gen = generator(&a);
     let opts = SegmentOptions {
         dictionary: a

@@ -13,7 +13,8 @@
 
 use candle_nn::VarBuilder;
 
-use super::kernels::{add_assign, add_into, gelu_inplace, matmul, relu_inplace};
+use super::elementwise::{add_assign, add_into, gelu_inplace, relu_inplace};
+use super::kernels::{matmul, transpose};
 use super::layers::{get_vec, Attention, Linear, Norm};
 use super::prompt::{EMBED_DIM, GRID};
 
@@ -71,7 +72,8 @@ pub struct ImageContext {
     keys0: Vec<f32>,
     /// Dense positional encoding (4096×256).
     pe: Vec<f32>,
-    /// First block, token-to-image keys and values (4096×128 each).
+    /// First block, token-to-image keys, per head transposed (8 × 16 × 4096), and values
+    /// (4096×128).
     k0: Vec<f32>,
     v0: Vec<f32>,
     /// First block, image-to-token queries (4096×128).
@@ -86,6 +88,10 @@ pub struct Scratch {
     keys_pe: Vec<f32>,
     attn: Vec<f32>,
     s: Vec<f32>,
+    up_x: Vec<f32>,
+    up_y1: Vec<f32>,
+    up_y2: Vec<f32>,
+    up_m: Vec<f32>,
 }
 
 /// Decoder output for one point prompt (SAM's three multimask outputs).
@@ -204,7 +210,8 @@ impl MaskDecoder {
         add_into(&mut keys0_pe, &keys0, pe);
         let b0 = &self.blocks[0];
         ImageContext {
-            k0: b0.t2i.k.forward(&keys0_pe, n),
+            // Transposed, row h·16 + i is channel i of head h: heads × 16 × N.
+            k0: transpose(&b0.t2i.k.forward(&keys0_pe, n), n, EMBED_DIM / 2),
             v0: b0.t2i.v.forward(&keys0, n),
             q0: b0.i2t.q.forward(&keys0_pe, n),
             keys0,
@@ -243,8 +250,10 @@ impl MaskDecoder {
             &mut sc.s,
             &mut sc.attn,
         );
-        add_into(&mut sc.keys, &ctx.keys0, &sc.attn);
-        b.norm4.apply(&mut sc.keys);
+        // keys = norm4(keys0 + attn), keys_pe = keys + pe; `attn` becomes the next scratch.
+        b.norm4
+            .residual_pe(&mut sc.attn, &ctx.keys0, &ctx.pe, &mut sc.keys_pe);
+        std::mem::swap(&mut sc.keys, &mut sc.attn);
 
         // Block 1.
         let b = &self.blocks[1];
@@ -252,7 +261,6 @@ impl MaskDecoder {
         let out = b.self_attn.forward_small(&q, &q, &queries, N_TOKENS);
         add_assign(&mut queries, &out);
         b.norm1.apply(&mut queries);
-        add_into(&mut sc.keys_pe, &sc.keys, &ctx.pe);
         let out = b.t2i.tokens_to_image_folded(
             &with_pe(&queries),
             N_TOKENS,
@@ -272,11 +280,11 @@ impl MaskDecoder {
             &mut sc.s,
             &mut sc.attn,
         );
-        add_assign(&mut sc.keys, &sc.attn);
-        b.norm4.apply(&mut sc.keys);
+        b.norm4
+            .residual_pe(&mut sc.attn, &sc.keys, &ctx.pe, &mut sc.keys_pe);
+        std::mem::swap(&mut sc.keys, &mut sc.attn);
 
         // Final token-to-image attention.
-        add_into(&mut sc.keys_pe, &sc.keys, &ctx.pe);
         let out = self.final_attn.tokens_to_image_folded(
             &with_pe(&queries),
             N_TOKENS,
@@ -321,7 +329,7 @@ impl MaskDecoder {
                 &hs[(1 + m) * EMBED_DIM..(2 + m) * EMBED_DIM],
             ));
         }
-        let logits = self.upscale(&sc.keys, &hyper, tok_rows, tok_cols);
+        let logits = self.upscale(sc, &hyper, tok_rows, tok_cols);
         PromptMasks {
             iou_pred,
             logits: Some(logits),
@@ -330,75 +338,92 @@ impl MaskDecoder {
         }
     }
 
-    /// Output upscaling + hypernetwork products over the top-left tok_rows×tok_cols cells.
-    fn upscale(&self, keys: &[f32], hyper: &[f32], tok_rows: usize, tok_cols: usize) -> Vec<f32> {
+    /// Output upscaling + hypernetwork products over the top-left tok_rows×tok_cols cells of
+    /// the final image tokens (`sc.keys`), into `sc.up_*` buffers reused across prompts.
+    fn upscale(
+        &self,
+        sc: &mut Scratch,
+        hyper: &[f32],
+        tok_rows: usize,
+        tok_cols: usize,
+    ) -> Vec<f32> {
         let nt = tok_rows * tok_cols;
-        let mut x = Vec::with_capacity(nt * EMBED_DIM);
-        for ty in 0..tok_rows {
-            x.extend_from_slice(&keys[ty * GRID * EMBED_DIM..(ty * GRID + tok_cols) * EMBED_DIM]);
-        }
+        // Whole token rows are contiguous already (landscape images cover all 64 columns).
+        let x: &[f32] = if tok_cols == GRID {
+            &sc.keys[..nt * EMBED_DIM]
+        } else {
+            sc.up_x.clear();
+            for ty in 0..tok_rows {
+                let row = ty * GRID * EMBED_DIM;
+                sc.up_x
+                    .extend_from_slice(&sc.keys[row..row + tok_cols * EMBED_DIM]);
+            }
+            &sc.up_x
+        };
         // Stage 1: 256 → 4 sub-pixels × 64, LayerNorm2d over the 64 channels, GELU.
-        let mut y1 = vec![0.0f32; nt * 4 * UP1];
+        let y1 = &mut sc.up_y1;
+        y1.resize(nt * 4 * UP1, 0.0);
         for row in y1.chunks_exact_mut(UP1) {
             row.copy_from_slice(&self.up1_b);
         }
+        let n1 = 4 * UP1;
         matmul(
             nt,
-            4 * UP1,
+            n1,
             EMBED_DIM,
-            &x,
+            x,
             (EMBED_DIM, 1),
             &self.up1_w,
-            (4 * UP1, 1),
-            &mut y1,
-            4 * UP1,
+            (n1, 1),
+            y1,
+            n1,
             true,
         );
-        self.up_ln.apply(&mut y1);
-        gelu_inplace(&mut y1);
+        self.up_ln.apply(y1);
+        gelu_inplace(y1);
         // Stage 2: 64 → 4 sub-pixels × 32, GELU.
-        let mut y2 = vec![0.0f32; nt * 16 * UP2];
+        let y2 = &mut sc.up_y2;
+        y2.resize(nt * 16 * UP2, 0.0);
         for row in y2.chunks_exact_mut(UP2) {
             row.copy_from_slice(&self.up2_b);
         }
+        let n2 = 4 * UP2;
         matmul(
             nt * 4,
-            4 * UP2,
+            n2,
             UP1,
-            &y1,
+            y1,
             (UP1, 1),
             &self.up2_w,
-            (4 * UP2, 1),
-            &mut y2,
-            4 * UP2,
+            (n2, 1),
+            y2,
+            n2,
             true,
         );
-        gelu_inplace(&mut y2);
+        gelu_inplace(y2);
         // Masks: each 32-channel pixel dotted with the three hypernetwork vectors.
-        let mut m = vec![0.0f32; nt * 16 * 3];
-        matmul(
-            nt * 16,
-            3,
-            UP2,
-            &y2,
-            (UP2, 1),
-            hyper,
-            (1, UP2),
-            &mut m,
-            3,
-            false,
-        );
-        let (rows, cols) = (4 * tok_rows, 4 * tok_cols);
-        let mut out = vec![0.0f32; 3 * rows * cols];
-        for (r, px) in m.chunks_exact(3).enumerate() {
-            // r = ((token · 4 + s1) · 4 + s2), s = dy·2 + dx at each stage.
-            let (token, s1, s2) = (r / 16, (r / 4) % 4, r % 4);
-            let y = 4 * (token / tok_cols) + 2 * (s1 / 2) + s2 / 2;
-            let xx = 4 * (token % tok_cols) + 2 * (s1 % 2) + s2 % 2;
+        let m = &mut sc.up_m;
+        m.resize(nt * 16 * 3, 0.0);
+        matmul(nt * 16, 3, UP2, y2, (UP2, 1), hyper, (1, UP2), m, 3, false);
+        scatter_subpixels(m, tok_rows, tok_cols)
+    }
+}
+
+/// Rearrange the upscaler's rows, ordered (token, s1, s2) with s = dy·2 + dx at each 2×2
+/// stage and 3 mask values each, into 3 planes of (4·tok_rows)×(4·tok_cols) pixels.
+fn scatter_subpixels(m: &[f32], tok_rows: usize, tok_cols: usize) -> Vec<f32> {
+    let (rows, cols) = (4 * tok_rows, 4 * tok_cols);
+    let mut out = vec![0.0f32; 3 * rows * cols];
+    for (token, cell) in m.chunks_exact(16 * 3).enumerate() {
+        let (y0, x0) = (4 * (token / tok_cols), 4 * (token % tok_cols));
+        for (s, px) in cell.chunks_exact(3).enumerate() {
+            let (s1, s2) = (s / 4, s % 4);
+            let y = y0 + 2 * (s1 / 2) + s2 / 2;
+            let x = x0 + 2 * (s1 % 2) + s2 % 2;
             for (k, &v) in px.iter().enumerate() {
-                out[(k * rows + y) * cols + xx] = v;
+                out[(k * rows + y) * cols + x] = v;
             }
         }
-        out
     }
+    out
 }

@@ -10,7 +10,8 @@
 
 use candle_nn::VarBuilder;
 
-use super::kernels::{layer_norm, linear, matmul, softmax_groups};
+use super::elementwise::{layer_norm, residual_norm_pe, softmax_columns, softmax_groups};
+use super::kernels::{linear, matmul, transpose};
 
 /// Read a weight as a flat f32 vector of the given shape.
 pub fn get_vec(vb: &VarBuilder, shape: &[usize], name: &str) -> candle_core::Result<Vec<f32>> {
@@ -20,10 +21,13 @@ pub fn get_vec(vb: &VarBuilder, shape: &[usize], name: &str) -> candle_core::Res
         .to_vec1::<f32>()
 }
 
-/// `nn.Linear` with bias: `w` is out×in row-major.
+/// `nn.Linear` with bias: `w` is out×in row-major (PyTorch), `wt` its in×out transpose. The
+/// products use `wt`: `gemm` computes a row-major product as its transpose and would otherwise
+/// repack the strided weight element by element on every call (measured: ~15% of the decoder).
 #[derive(Debug, Clone)]
 pub struct Linear {
     pub w: Vec<f32>,
+    pub wt: Vec<f32>,
     pub b: Vec<f32>,
     pub n_in: usize,
     pub n_out: usize,
@@ -31,8 +35,10 @@ pub struct Linear {
 
 impl Linear {
     pub fn load(vb: &VarBuilder, n_in: usize, n_out: usize) -> candle_core::Result<Self> {
+        let w = get_vec(vb, &[n_out, n_in], "weight")?;
         Ok(Self {
-            w: get_vec(vb, &[n_out, n_in], "weight")?,
+            wt: transpose(&w, n_out, n_in),
+            w,
             b: get_vec(vb, &[n_out], "bias")?,
             n_in,
             n_out,
@@ -40,7 +46,7 @@ impl Linear {
     }
 
     pub fn forward(&self, x: &[f32], rows: usize) -> Vec<f32> {
-        linear(x, rows, &self.w, Some(&self.b), self.n_out)
+        linear(x, rows, &self.wt, Some(&self.b), self.n_out)
     }
 }
 
@@ -63,6 +69,11 @@ impl Norm {
 
     pub fn apply(&self, x: &mut [f32]) {
         layer_norm(x, self.w.len(), &self.w, &self.b, self.eps);
+    }
+
+    /// `x = norm(base + x)` and `x_pe = x + pe` in one pass (see `residual_norm_pe`).
+    pub fn residual_pe(&self, x: &mut [f32], base: &[f32], pe: &[f32], x_pe: &mut [f32]) {
+        residual_norm_pe(x, base, pe, x_pe, (&self.w, &self.b, self.eps));
     }
 }
 
@@ -145,17 +156,19 @@ impl Attention {
         self.out.forward(&o, n)
     }
 
-    /// Tokens attend to image tokens whose key/value projections `k_img`, `v_img`
-    /// (N×internal) were computed once per image (first block, before the image side changes).
+    /// Tokens attend to image tokens whose key/value projections were computed once per image
+    /// (first block, before the image side changes): `k_img_t` holds each head's keys
+    /// transposed (heads × head_dim × N, so the score product reads a row-major operand),
+    /// `v_img` the values (N×internal).
     pub fn tokens_to_precomputed(
         &self,
         q: &[f32],
         nq: usize,
-        k_img: &[f32],
+        k_img_t: &[f32],
         v_img: &[f32],
     ) -> Vec<f32> {
         let (inner, d) = (self.internal(), self.head_dim());
-        let n_img = k_img.len() / inner;
+        let n_img = v_img.len() / inner;
         let qp = self.q.forward(q, nq);
         let mut s = vec![0.0f32; nq * n_img];
         let mut o = vec![0.0f32; nq * inner];
@@ -166,8 +179,8 @@ impl Attention {
                 d,
                 &qp[h * d..],
                 (inner, 1),
-                &k_img[h * d..],
-                (1, inner),
+                &k_img_t[h * d * n_img..],
+                (n_img, 1),
                 &mut s,
                 n_img,
                 false,
@@ -220,48 +233,29 @@ impl Attention {
                 false,
             );
         }
-        s.resize(heads * nq * n_img, 0.0);
-        matmul(
-            heads * nq,
-            n_img,
-            dim,
-            &qt,
-            (dim, 1),
-            img_pe,
-            (1, dim),
-            s,
-            n_img,
-            false,
-        );
-        softmax_groups(s, n_img, 1.0 / (d as f32).sqrt());
-        let mut ak = vec![0.0f32; heads * nq * dim];
-        matmul(
-            heads * nq,
-            dim,
-            n_img,
-            s,
-            (n_img, 1),
-            img,
-            (dim, 1),
-            &mut ak,
-            dim,
-            false,
-        );
+        // Scores transposed, sᵀ = img_pe · qtᵀ (N × heads·nq): both operands row-major, so
+        // `gemm` streams the 4096×256 image side without repacking it.
+        let g = heads * nq;
+        let qt_t = transpose(&qt, g, dim);
+        s.resize(n_img * g, 0.0);
+        matmul(n_img, g, dim, img_pe, (dim, 1), &qt_t, (g, 1), s, g, false);
+        softmax_columns(s, g, 1.0 / (d as f32).sqrt());
+        let mut ak = vec![0.0f32; g * dim];
+        matmul(g, dim, n_img, s, (1, g), img, (dim, 1), &mut ak, dim, false);
         // o_h = ak_h · Wv_hᵀ + bv_h
         let mut o = vec![0.0f32; nq * inner];
         for row in o.chunks_exact_mut(inner) {
             row.copy_from_slice(&self.v.b);
         }
         for h in 0..heads {
-            let wv_h = &self.v.w[h * d * dim..];
             matmul(
                 nq,
                 d,
                 dim,
                 &ak[h * nq * dim..],
                 (dim, 1),
-                wv_h,
-                (1, dim),
+                &self.v.wt[h * d..],
+                (inner, 1),
                 &mut o[h * d..],
                 inner,
                 true,
@@ -313,13 +307,12 @@ impl Attention {
                 let mut m = vec![0.0f32; dim * g];
                 let mut c = vec![0.0f32; g];
                 for h in 0..heads {
-                    let wq_h = &self.q.w[h * d * dim..];
                     matmul(
                         dim,
                         nq,
                         d,
-                        wq_h,
-                        (1, dim),
+                        &self.q.wt[h * d..],
+                        (inner, 1),
                         &kp[h * d..],
                         (1, inner),
                         &mut m[h * nq..],
@@ -348,8 +341,8 @@ impl Attention {
                 d,
                 &vp[h * d..],
                 (inner, 1),
-                &self.out.w[h * d..],
-                (1, inner),
+                &self.out.wt[h * d * dim..],
+                (dim, 1),
                 &mut vw[h * nq * dim..],
                 dim,
                 false,

@@ -1,15 +1,18 @@
 //! Segment Anything (SAM / MobileSAM) for automatic mask generation on the CPU.
 //!
-//! The image encoders (TinyViT for MobileSAM, ViT-B/L/H) are candle-transformers'; the prompt
+//! The image encoders are candle-transformers' ViT-B/L/H and our TinyViT (`tiny_vit.rs`, candle's
+//! with the exact erf GELU, vectorized and multi-threaded); the prompt
 //! encoder and mask decoder are re-implemented here on plain f32 buffers (see `decoder.rs` for
 //! why), loading the same checkpoint keys as the official `segment_anything` code.
 
 pub mod decoder;
+pub mod elementwise;
 pub mod kernels;
 pub mod layers;
 pub mod model;
 pub mod prompt;
 pub mod resize;
+pub mod tiny_vit;
 
 pub use decoder::{ImageContext, MaskDecoder, PromptMasks, Scratch};
 pub use model::{Backbone, ImageEmbedding, Sam, MOBILE_SAM_HINT};
@@ -30,6 +33,24 @@ pub enum SamError {
     Candle(#[from] candle_core::Error),
     #[error("SAM input: {0}")]
     Input(String),
+}
+
+/// Sets `RAYON_NUM_THREADS` (when unset) to this machine's available parallelism, the count
+/// rayon uses by default anyway. Why: candle-core 0.11 looks its thread count up on every
+/// matmul and convolution tile (`utils::get_num_threads`), and without that variable (or a
+/// `cpu_capacity` file in sysfs) it calls `num_cpus::get_physical()`, which parses
+/// `/proc/cpuinfo` each time: ~11% of the MobileSAM encoder's samples in `perf` on this
+/// machine. With the variable set, candle uses that count, as does rayon's global pool.
+///
+/// # Safety
+/// Writes the process environment: call at program start, while no other thread can read or
+/// write it (`std::env::set_var`).
+pub unsafe fn set_thread_count_env() {
+    if std::env::var_os("RAYON_NUM_THREADS").is_none() {
+        let n = std::thread::available_parallelism().map_or(1, |n| n.get());
+        // SAFETY: the caller guarantees no concurrent environment access (see above).
+        unsafe { std::env::set_var("RAYON_NUM_THREADS", n.to_string()) };
+    }
 }
 
 /// The weights folder: `$SEMDYNREG_WEIGHTS`, else `./weights`.

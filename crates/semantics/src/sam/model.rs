@@ -7,11 +7,11 @@ use std::path::{Path, PathBuf};
 use candle_core::{DType, Device, Module, Tensor};
 use candle_nn::VarBuilder;
 use candle_transformers::models::segment_anything::image_encoder::ImageEncoderViT;
-use candle_transformers::models::segment_anything::tiny_vit::{tiny_vit_5m, TinyViT};
 
 use super::decoder::{ImageContext, MaskDecoder};
 use super::prompt::{PromptEncoder, EMBED_DIM, GRID, IMAGE_SIZE};
 use super::resize::{preprocess_shape, resize_rgb_pil_bilinear};
+use super::tiny_vit::{tiny_vit_5m, TinyViT};
 use super::SamError;
 
 /// Which image encoder a checkpoint holds.

@@ -1,6 +1,6 @@
 //! LPIPS v0.1 (Zhang et al. 2018, github.com/richzhang/PerceptualSimilarity) with the AlexNet
 //! (default, as gsplat's examples) or VGG16 (as Deformable-3DGS's `metrics.py`) backbone,
-//! inference only, on candle.
+//! inference only, on our own NHWC im2col + `gemm` convolution (`lpips/conv.rs`).
 //!
 //! Semantics follow the reference `lpips.LPIPS(net=..., version='0.1')` forward exactly:
 //! inputs in [0, 1] are mapped to [−1, 1] (`2x − 1`), then the ScalingLayer
@@ -12,9 +12,15 @@
 //! `scripts/fetch_lpips.sh` (PyTorch layout: `net.conv{i}.weight` OIHW, `net.conv{i}.bias`,
 //! `lin{j}.weight` (1, C, 1, 1)), found in `$SEMDYNREG_WEIGHTS`, default `./weights`.
 
-use candle_core::{DType, Device, Tensor};
-use std::collections::HashMap;
+mod conv;
+mod tensor;
+mod weights;
+
+use conv::Conv2d;
+use rayon::prelude::*;
+use safetensors::SafeTensors;
 use std::path::{Path, PathBuf};
+use tensor::Nhwc;
 
 /// ScalingLayer constants of the reference implementation (ImageNet statistics in [−1, 1]).
 const SHIFT: [f32; 3] = [-0.030, -0.088, -0.188];
@@ -156,17 +162,15 @@ pub enum LpipsError {
         height: usize,
         min: usize,
     },
-    /// A tensor operation failed.
-    #[error("LPIPS: {0}")]
-    Candle(#[from] candle_core::Error),
 }
 
 /// A loaded LPIPS model.
 pub struct Lpips {
     net: LpipsNet,
-    convs: Vec<(ConvSpec, Tensor, Tensor)>,
-    /// Linear-layer weights as (1, C, 1, 1).
-    lins: Vec<Tensor>,
+    /// Each convolution with whether it is preceded by a max-pool and tapped.
+    convs: Vec<(ConvSpec, Conv2d)>,
+    /// Linear-layer weights, one per tap, `C` each.
+    lins: Vec<Vec<f32>>,
 }
 
 /// The weights directory: `$SEMDYNREG_WEIGHTS`, or `./weights` when unset.
@@ -193,11 +197,9 @@ impl Lpips {
             path: path.to_owned(),
             reason,
         };
-        let tensors =
-            candle_core::safetensors::load(path, &Device::Cpu).map_err(|e| bad(e.to_string()))?;
-        let get = |name: &str, shape: &[usize]| -> Result<Tensor, LpipsError> {
-            fetch(&tensors, name, shape).map_err(bad)
-        };
+        let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
+        let st = SafeTensors::deserialize(&bytes).map_err(|e| bad(e.to_string()))?;
+        let get = |name: &str, shape: &[usize]| weights::tensor_f32(&st, name, shape).map_err(bad);
         let mut convs = Vec::new();
         let mut lins = Vec::new();
         for (i, spec) in net.layers().into_iter().enumerate() {
@@ -213,7 +215,8 @@ impl Lpips {
                     &[1, spec.c_out, 1, 1],
                 )?);
             }
-            convs.push((spec, w, b.reshape((1, spec.c_out, 1, 1))?));
+            let conv = Conv2d::from_oihw(&w, b, spec.c_in, k, spec.padding, spec.stride);
+            convs.push((spec, conv));
         }
         Ok(Self { net, convs, lins })
     }
@@ -250,70 +253,80 @@ impl Lpips {
             });
         }
         // Both images go through the backbone as one batch of two.
-        let mut x = to_scaled_nchw(a, width, height);
-        x.extend(to_scaled_nchw(b, width, height));
-        let x = Tensor::from_vec(x, (2, 3, height, width), &Device::Cpu)?;
-        let feats = self.features(x)?;
-        let mut total = 0.0f32;
-        for (f, lin) in feats.iter().zip(&self.lins) {
-            total += layer_distance(f, lin)?;
-        }
-        Ok(total)
+        let mut data = to_scaled(a);
+        data.extend(to_scaled(b));
+        let x = Nhwc {
+            n: 2,
+            h: height,
+            w: width,
+            c: 3,
+            data,
+        };
+        Ok(self.pair_distance(x))
     }
 
-    /// Tapped ReLU outputs for the batch `x` (N, 3, H, W), already scaled.
-    fn features(&self, mut x: Tensor) -> Result<Vec<Tensor>, LpipsError> {
+    /// Runs the backbone on the scaled pair `x` and sums each tapped layer's term as soon as
+    /// it is produced (no copies of the taps are kept).
+    fn pair_distance(&self, mut x: Nhwc) -> f32 {
         let (pk, ps) = self.net.pool();
-        let mut taps = Vec::with_capacity(5);
-        for (spec, w, b) in &self.convs {
+        let mut lins = self.lins.iter();
+        let mut total = 0.0f32;
+        for (spec, conv) in &self.convs {
             if spec.pool_before {
-                x = x.max_pool2d_with_stride(pk, ps)?;
+                x = x.max_pool(pk, ps);
             }
-            x = x
-                .conv2d(w, spec.padding, spec.stride, 1, 1)?
-                .broadcast_add(b)?
-                .relu()?;
+            x = conv.forward_relu(&x);
             if spec.tap {
-                taps.push(x.clone());
+                let lin = lins
+                    .next()
+                    .expect("one linear layer per tap (checked at load)");
+                total += layer_distance(&x, lin);
             }
         }
-        Ok(taps)
+        total
     }
 }
 
-/// One layer's term: unit-normalize channels, squared difference, 1×1 linear, spatial mean.
-fn layer_distance(feat: &Tensor, lin: &Tensor) -> Result<f32, LpipsError> {
-    let norm = feat.sqr()?.sum_keepdim(1)?.sqrt()?.affine(1.0, 1e-10)?;
-    let unit = feat.broadcast_div(&norm)?;
-    let diff = (unit.get(0)? - unit.get(1)?)?.sqr()?; // (C, H, W)
-    let weighted = diff.broadcast_mul(&lin.get(0)?)?.sum(0)?; // (H, W)
-    Ok(weighted
-        .mean_all()?
-        .to_dtype(DType::F32)?
-        .to_scalar::<f32>()?)
+/// Pixels per rayon task in [`layer_distance`].
+const DIST_TASK_PIXELS: usize = 256;
+
+/// One layer's term for a batch of two (Zhang et al. 2018, Eq. 1): unit-normalize each
+/// pixel's channels (`x / (‖x‖₂ + 1e-10)`, the reference `normalize_tensor`), squared
+/// difference, weighted by the linear layer `lin`, averaged over space.
+fn layer_distance(feat: &Nhwc, lin: &[f32]) -> f32 {
+    let c = feat.c;
+    let plane = feat.h * feat.w * c;
+    let (fa, fb) = feat.data.split_at(plane);
+    let pixel = |pa: &[f32], pb: &[f32]| {
+        let inv = |p: &[f32]| 1.0 / (p.iter().map(|v| v * v).sum::<f32>().sqrt() + 1e-10);
+        let (ia, ib) = (inv(pa), inv(pb));
+        let d: f32 = pa
+            .iter()
+            .zip(pb)
+            .zip(lin)
+            .map(|((&u, &v), &w)| w * (u * ia - v * ib).powi(2))
+            .sum();
+        f64::from(d)
+    };
+    let sum: f64 = fa
+        .par_chunks(c * DIST_TASK_PIXELS)
+        .zip(fb.par_chunks(c * DIST_TASK_PIXELS))
+        .map(|(ta, tb)| {
+            ta.chunks_exact(c)
+                .zip(tb.chunks_exact(c))
+                .map(|(pa, pb)| pixel(pa, pb))
+                .sum::<f64>()
+        })
+        .sum();
+    (sum / (feat.h * feat.w) as f64) as f32
 }
 
-/// HWC [0, 1] → CHW, `(2x − 1 − shift) / scale` per channel (reference normalization).
-fn to_scaled_nchw(img: &[f32], width: usize, height: usize) -> Vec<f32> {
-    let plane = width * height;
-    let mut out = vec![0.0f32; 3 * plane];
-    for (p, px) in img.chunks_exact(3).enumerate() {
-        for c in 0..3 {
-            out[c * plane + p] = (2.0 * px[c] - 1.0 - SHIFT[c]) / SCALE[c];
-        }
-    }
-    out
-}
-
-fn fetch(map: &HashMap<String, Tensor>, name: &str, shape: &[usize]) -> Result<Tensor, String> {
-    let t = map
-        .get(name)
-        .ok_or_else(|| format!("missing tensor {name}"))?;
-    if t.dims() != shape {
-        return Err(format!(
-            "tensor {name} has shape {:?}, expected {shape:?}",
-            t.dims()
-        ));
-    }
-    t.to_dtype(DType::F32).map_err(|e| e.to_string())
+/// HWC [0, 1] → `(2x − 1 − shift) / scale` per channel (reference normalization), still
+/// HWC (= NHWC for one image).
+fn to_scaled(img: &[f32]) -> Vec<f32> {
+    img.chunks_exact(3)
+        .flat_map(|px| {
+            std::array::from_fn::<f32, 3, _>(|c| (2.0 * px[c] - 1.0 - SHIFT[c]) / SCALE[c])
+        })
+        .collect()
 }

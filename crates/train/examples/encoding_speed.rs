@@ -21,7 +21,9 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 fn main() {
-    let means: Vec<f32> = (0..300_000).map(|i| (i as f32 * 0.37).sin() * 1.3).collect();
+    let means: Vec<f32> = (0..300_000)
+        .map(|i| (i as f32 * 0.37).sin() * 1.3)
+        .collect();
     let mut out = vec![0.0; encoded_dim(3, 10)];
     let (mut fast, mut reference) = (Vec::new(), Vec::new());
     for _ in 0..9 {
@@ -29,5 +31,8 @@ fn main() {
         fast.push(time(encode_one, &means, &mut out));
     }
     let (f, r) = (median(fast), median(reference));
-    println!("100k rows: double-angle {f:.1} ms, reference {r:.1} ms, speed-up {:.2}×", r / f);
+    println!(
+        "100k rows: double-angle {f:.1} ms, reference {r:.1} ms, speed-up {:.2}×",
+        r / f
+    );
 }

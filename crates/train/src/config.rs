@@ -294,7 +294,13 @@ impl TrainConfig {
         let f = iters as f64 / self.iterations as f64;
         let at = |v: u32| (v as f64 * f).round() as u32;
         let every = |v: u32| if v == 0 { 0 } else { at(v).max(1) };
-        let window = |v: u32, floor: u32| if v == 0 { 0 } else { every(v).max(v.min(floor)) };
+        let window = |v: u32, floor: u32| {
+            if v == 0 {
+                0
+            } else {
+                every(v).max(v.min(floor))
+            }
+        };
         let mut c = self.clone();
         c.iterations = iters;
         c.field.warm_up = at(c.field.warm_up);

@@ -23,8 +23,8 @@ pub struct Args {
     /// Training iterations of each run (the 40k schedule rescaled).
     #[arg(long, default_value_t = 3000)]
     pub iters: u32,
-    /// Random initial Gaussians (the 40k schedule's 100k is 5× slower per step at this size
-    /// for no gain in 3k steps; docs/training.md). Written to `OUT/demo.toml` for both runs.
+    /// Random initial Gaussians: fewer than the 40k schedule's 100k, which the field would
+    /// evaluate at every step, to keep the demo short. Written to `OUT/demo.toml` for both runs.
     #[arg(long, default_value_t = 20_000)]
     pub points: usize,
     #[arg(long, default_value_t = 0)]

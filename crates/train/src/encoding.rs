@@ -9,7 +9,8 @@ pub fn encoded_dim(dim: usize, freqs: usize) -> usize {
     dim * (1 + 2 * freqs)
 }
 
-fn encode_into(x: &[f32], freqs: usize, out: &mut [f32]) {
+/// One row of the encoding (`encoded_dim(x.len(), freqs)` values) into `out`.
+pub fn encode_one(x: &[f32], freqs: usize, out: &mut [f32]) {
     let d = x.len();
     out[..d].copy_from_slice(x);
     for (k, &v) in x.iter().enumerate() {
@@ -44,11 +45,6 @@ pub fn encode_reference(x: &[f32], freqs: usize, out: &mut [f32]) {
     }
 }
 
-/// One row of the encoding (`encoded_dim(x.len(), freqs)` values) into `out`.
-pub fn encode_one(x: &[f32], freqs: usize, out: &mut [f32]) {
-    encode_into(x, freqs, out)
-}
-
 /// Encodes the rows `idx` of `means (N·3)` with time `t` into `out` (`idx.len() × width`).
 pub fn encode_rows(
     means: &[f32],
@@ -61,14 +57,14 @@ pub fn encode_rows(
     let px = encoded_dim(3, pos_freqs);
     let width = px + encoded_dim(1, time_freqs);
     let mut t_enc = vec![0.0; width - px];
-    encode_into(&[t], time_freqs, &mut t_enc);
+    encode_one(&[t], time_freqs, &mut t_enc);
     out.resize(idx.len() * width, 0.0);
     out.par_chunks_mut(width * 256)
         .zip(idx.par_chunks(256))
         .for_each(|(o, ids)| {
             for (row, &i) in o.chunks_exact_mut(width).zip(ids) {
                 let i = i as usize;
-                encode_into(&means[i * 3..i * 3 + 3], pos_freqs, &mut row[..px]);
+                encode_one(&means[i * 3..i * 3 + 3], pos_freqs, &mut row[..px]);
                 row[px..].copy_from_slice(&t_enc);
             }
         });

@@ -38,6 +38,8 @@ pub struct Dataset {
     /// Sparse points shipped with the scene (`points3d.ply` for D-NeRF, `points.npy` for
     /// Nerfies, in the same world frame as the cameras), when present.
     pub point_cloud: Option<Vec<[f32; 3]>>,
+    /// Colours of `point_cloud` in [0, 1], when the file has them (PLY `red green blue`).
+    pub point_colors: Option<Vec<[f32; 3]>>,
 }
 
 /// How to load a data set.

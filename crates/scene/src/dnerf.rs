@@ -48,10 +48,11 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, SceneError> {
     let val = splits.pop().unwrap_or_default();
     let train = splits.pop().unwrap_or_default();
     let ply_path = root.join("points3d.ply");
-    let point_cloud = if ply_path.is_file() {
-        Some(ply::read_points(&ply_path)?)
+    let (point_cloud, point_colors) = if ply_path.is_file() {
+        let (p, c) = ply::read_points_rgb(&ply_path)?;
+        (Some(p), c)
     } else {
-        None
+        (None, None)
     };
     Ok(Dataset {
         root: root.to_path_buf(),
@@ -61,6 +62,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, SceneError> {
         background: opts.background,
         kind: DatasetKind::DNerf,
         point_cloud,
+        point_colors,
     })
 }
 

@@ -25,3 +25,4 @@ pub use dataset::{
 };
 pub use error::SceneError;
 pub use ply::read_points as read_ply_points;
+pub use ply::read_points_rgb as read_ply_points_rgb;

@@ -78,6 +78,8 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, SceneError> {
         background: opts.background,
         kind: DatasetKind::Nerfies,
         point_cloud,
+        // Nerfies' `points.npy` holds positions only.
+        point_colors: None,
     })
 }
 

@@ -1,5 +1,6 @@
-//! Reads the `x y z` of the `vertex` element of a PLY file (ASCII or binary little-endian,
-//! any scalar types), e.g. the `points3d.ply` Deformable-3DGS writes beside D-NeRF scenes.
+//! Reads the `x y z` (and, when present, `red green blue`) of the `vertex` element of a PLY
+//! file (ASCII or binary little-endian, any scalar types), e.g. the `points3d.ply`
+//! Deformable-3DGS writes beside D-NeRF scenes or a COLMAP point cloud.
 
 use crate::SceneError;
 use std::path::Path;
@@ -12,31 +13,59 @@ struct Property {
 
 /// The vertex positions of a PLY file.
 pub fn read_points(path: &Path) -> Result<Vec<[f32; 3]>, SceneError> {
+    Ok(read_points_rgb(path)?.0)
+}
+
+/// The vertex positions of a PLY file and their colours in [0, 1] when the vertices have
+/// `red green blue` (integer types are divided by their maximum, as 3DGS's `fetchPly`
+/// does for `uchar`; float colours are taken as they are, clamped to [0, 1]).
+pub fn read_points_rgb(path: &Path) -> Result<PointsRgb, SceneError> {
     let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
     let bad = |msg: &str| SceneError::invalid(path, format!("PLY: {msg}"));
     let end = find_header_end(&bytes).ok_or_else(|| bad("no `end_header` line"))?;
     let header = std::str::from_utf8(&bytes[..end]).map_err(|_| bad("header is not text"))?;
     let (format, count, props) = parse_header(header).map_err(|m| bad(&m))?;
-    let idx: Vec<usize> = ["x", "y", "z"]
+    let find = |n: &str| props.iter().position(|p| p.name == n);
+    let mut idx: Vec<usize> = ["x", "y", "z"]
         .iter()
-        .map(|n| {
-            props
-                .iter()
-                .position(|p| p.name == *n)
-                .ok_or_else(|| bad(&format!("vertex has no `{n}`")))
-        })
+        .map(|n| find(n).ok_or_else(|| bad(&format!("vertex has no `{n}`"))))
         .collect::<Result<_, _>>()?;
+    let rgb: Option<Vec<usize>> = ["red", "green", "blue"].iter().map(|n| find(n)).collect();
+    idx.extend(rgb.iter().flatten());
     let body = &bytes[end..];
-    let points = match format.as_str() {
+    let values = match format.as_str() {
         "ascii" => read_ascii(body, count, props.len(), &idx),
         "binary_little_endian" => read_binary(body, count, &props, &idx),
         other => Err(format!("unsupported format `{other}`")),
     }
     .map_err(|m| bad(&m))?;
-    if points.iter().flatten().any(|v| !v.is_finite()) {
-        return Err(bad("non-finite vertex coordinate"));
+    if values.iter().any(|v| !v.is_finite()) {
+        return Err(bad("non-finite vertex value"));
     }
-    Ok(points)
+    let cols = idx.len();
+    let points = values
+        .chunks_exact(cols)
+        .map(|v| [v[0], v[1], v[2]])
+        .collect();
+    let colors = rgb.map(|rgb| {
+        let max: Vec<f32> = rgb.iter().map(|&k| colour_max(&props[k])).collect();
+        values
+            .chunks_exact(cols)
+            .map(|v| std::array::from_fn(|c| (v[3 + c] / max[c]).clamp(0.0, 1.0)))
+            .collect()
+    });
+    Ok((points, colors))
+}
+
+/// Positions and, when the file has them, colours in [0, 1].
+pub type PointsRgb = (Vec<[f32; 3]>, Option<Vec<[f32; 3]>>);
+
+/// The value of a colour property that means full intensity (255 for `uchar`).
+fn colour_max(p: &Property) -> f32 {
+    match p.kind {
+        'f' => 1.0,
+        _ => ((1u64 << (8 * p.size - (p.kind == 'i') as usize)) - 1) as f32,
+    }
 }
 
 fn find_header_end(bytes: &[u8]) -> Option<usize> {
@@ -93,15 +122,10 @@ fn property(ty: &str, name: &str) -> Result<Property, String> {
     })
 }
 
-fn read_ascii(
-    body: &[u8],
-    count: usize,
-    nprops: usize,
-    idx: &[usize],
-) -> Result<Vec<[f32; 3]>, String> {
+fn read_ascii(body: &[u8], count: usize, nprops: usize, idx: &[usize]) -> Result<Vec<f32>, String> {
     let text = std::str::from_utf8(body).map_err(|_| "ASCII body is not text")?;
     let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-    (0..count)
+    let rows: Result<Vec<Vec<f32>>, String> = (0..count)
         .map(|i| {
             let line = lines
                 .next()
@@ -117,9 +141,10 @@ fn read_ascii(
                     v.len()
                 ));
             }
-            Ok([v[idx[0]], v[idx[1]], v[idx[2]]])
+            Ok(idx.iter().map(|&k| v[k]).collect())
         })
-        .collect()
+        .collect();
+    Ok(rows?.concat())
 }
 
 fn read_binary(
@@ -127,7 +152,7 @@ fn read_binary(
     count: usize,
     props: &[Property],
     idx: &[usize],
-) -> Result<Vec<[f32; 3]>, String> {
+) -> Result<Vec<f32>, String> {
     let stride: usize = props.iter().map(|p| p.size).sum();
     if body.len() < stride * count {
         return Err(format!(
@@ -160,7 +185,7 @@ fn read_binary(
     Ok(body
         .chunks_exact(stride)
         .take(count)
-        .map(|rec| [value(rec, idx[0]), value(rec, idx[1]), value(rec, idx[2])])
+        .flat_map(|rec| idx.iter().map(move |&k| value(rec, k)))
         .collect())
 }
 
@@ -184,7 +209,37 @@ mod tests {
             read_points(&p).unwrap(),
             vec![[1.0, 2.0, 3.0], [-1.0, 0.5, 0.25]]
         );
+        assert_eq!(
+            read_points_rgb(&p).unwrap().1,
+            None,
+            "red alone is no colour"
+        );
         std::fs::write(&p, "ply\nformat ascii 1.0\nelement vertex 1\nproperty double x\nproperty double y\nproperty double z\nend_header\n1 2 3\n").unwrap();
         assert_eq!(read_points(&p).unwrap(), vec![[1.0, 2.0, 3.0]]);
+    }
+
+    /// 3DGS / COLMAP clouds: `uchar` colours become [0, 1]; float colours are kept.
+    #[test]
+    fn reads_vertex_colours() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.ply");
+        let mut b = b"ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n".to_vec();
+        for (v, c) in [
+            ([1.0f32, 2.0, 3.0], [255u8, 0, 51]),
+            ([4.0, 5.0, 6.0], [0, 255, 102]),
+        ] {
+            for x in v.iter().chain(&[0.0]) {
+                b.extend(x.to_le_bytes());
+            }
+            b.extend(c);
+        }
+        std::fs::write(&p, b).unwrap();
+        let (pts, cols) = read_points_rgb(&p).unwrap();
+        assert_eq!(pts, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+        let cols = cols.expect("colours");
+        assert_eq!(cols[0], [1.0, 0.0, 0.2]);
+        assert_eq!(cols[1], [0.0, 1.0, 0.4]);
+        std::fs::write(&p, "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nproperty float red\nproperty float green\nproperty float blue\nend_header\n1 2 3 0.25 1.5 0.5\n").unwrap();
+        assert_eq!(read_points_rgb(&p).unwrap().1, Some(vec![[0.25, 1.0, 0.5]]));
     }
 }

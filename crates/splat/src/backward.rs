@@ -7,11 +7,13 @@
 //! (no gradient through the clamp), `dL/dc = T·α·v`.
 //!
 //! Per-Gaussian sums over the tile's pixels are accumulated lane-wise, reduced once per
-//! Gaussian and added to the calling thread's accumulator (no atomics), indexed by depth
-//! rank like the splats.
+//! Gaussian and handed to `emit(depth rank, sums)`, which stores them in the Gaussian's
+//! slot for this tile (`grad_slots`: a fixed-order sum afterwards keeps gradients
+//! deterministic).
 
 use crate::fastexp;
 use crate::forward::{Splat, ALPHA_MAX, ALPHA_MIN, TP, TS};
+use crate::raster::Simd;
 
 /// Gradient sums of one Gaussian: mean2d x, y; conic a, b, c; rgb; opacity.
 pub(crate) type GradAcc = [f32; 9];
@@ -29,26 +31,44 @@ pub(crate) struct TileGradIn<'a> {
 }
 
 pub(crate) fn backward_tile(
-    avx2: bool,
+    simd: Simd,
     tin: &TileGradIn,
     list: &[u32],
     splats: &[Splat],
-    acc: &mut [GradAcc],
+    emit: &mut impl FnMut(usize, &GradAcc),
 ) {
     #[cfg(target_arch = "x86_64")]
-    if avx2 {
-        // SAFETY: the caller checked that the CPU supports AVX2 and FMA.
-        unsafe { backward_avx2(tin, list, splats, acc) };
-        return;
+    match simd {
+        // SAFETY: `simd_level` checked that the CPU supports these features.
+        Simd::Avx512 => unsafe { return backward_avx512(tin, list, splats, emit) },
+        // SAFETY: as above.
+        Simd::Avx2 => unsafe { return backward_avx2(tin, list, splats, emit) },
+        Simd::Portable => {}
     }
-    let _ = avx2;
-    backward_impl(tin, list, splats, acc)
+    let _ = simd;
+    backward_impl(tin, list, splats, emit)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn backward_avx2(tin: &TileGradIn, list: &[u32], splats: &[Splat], acc: &mut [GradAcc]) {
-    backward_impl(tin, list, splats, acc)
+unsafe fn backward_avx2(
+    tin: &TileGradIn,
+    list: &[u32],
+    splats: &[Splat],
+    emit: &mut impl FnMut(usize, &GradAcc),
+) {
+    backward_impl(tin, list, splats, emit)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn backward_avx512(
+    tin: &TileGradIn,
+    list: &[u32],
+    splats: &[Splat],
+    emit: &mut impl FnMut(usize, &GradAcc),
+) {
+    backward_impl(tin, list, splats, emit)
 }
 
 struct BackState {
@@ -57,7 +77,12 @@ struct BackState {
 }
 
 #[inline(always)]
-fn backward_impl(tin: &TileGradIn, list: &[u32], splats: &[Splat], acc: &mut [GradAcc]) {
+fn backward_impl(
+    tin: &TileGradIn,
+    list: &[u32],
+    splats: &[Splat],
+    emit: &mut impl FnMut(usize, &GradAcc),
+) {
     let mut row_last = [0u32; TS];
     for (r, rl) in row_last.iter_mut().enumerate() {
         *rl = tin.last[r * TS..(r + 1) * TS]
@@ -83,15 +108,16 @@ fn backward_impl(tin: &TileGradIn, list: &[u32], splats: &[Splat], acc: &mut [Gr
             if pos as u32 >= rl {
                 continue;
             }
-            touched = true;
             let dy = sp.my - (tin.y0 as f32 + r as f32 + 0.5);
+            if !sp.reaches_row(dy, tin.x0 as f32) {
+                continue;
+            }
+            touched = true;
             backward_row(sp, &px, dy, pos as u32 + 1, r, tin, &mut st, &mut sums);
         }
         if touched {
-            let a = &mut acc[rank];
-            for (k, s) in sums.iter().enumerate() {
-                a[k] += s.iter().sum::<f32>();
-            }
+            let total: GradAcc = std::array::from_fn(|k| sums[k].iter().sum::<f32>());
+            emit(rank, &total);
         }
     }
 }

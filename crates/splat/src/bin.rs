@@ -24,8 +24,12 @@ pub(crate) struct Bins {
     pub order: Vec<u32>,
     /// Depth rank of each Gaussian (`u32::MAX` when not visible).
     pub rank_of: Vec<u32>,
+    /// `order.len() + 1` prefix sums of the ranks' tile-rectangle areas: rank `r` owns
+    /// the intersection slots `slot_start[r]..slot_start[r + 1]` (see `grad_slots`).
+    pub slot_start: Vec<usize>,
     keys: Vec<u64>,
-    rects: Vec<[u32; 4]>,
+    /// Tile rectangle `[x0, x1, y0, y1)` of each Gaussian (by global index).
+    pub rects: Vec<[u32; 4]>,
     cursor: Vec<usize>,
 }
 
@@ -56,6 +60,15 @@ impl Bins {
         &self.ids[self.offsets[tile]..self.offsets[tile + 1]]
     }
 
+    /// Gradient slot of the Gaussian of depth rank `rank` in tile `(tx, ty)`, which must
+    /// be inside its rectangle.
+    #[inline]
+    pub fn slot(&self, rank: usize, tx: usize, ty: usize) -> usize {
+        let [x0, x1, y0, _] = self.rects[self.order[rank] as usize];
+        let (x0, x1, y0) = (x0 as usize, x1 as usize, y0 as usize);
+        self.slot_start[rank] + (ty - y0) * (x1 - x0) + (tx - x0)
+    }
+
     pub fn build(&mut self, proj: &[Projected], width: u32, height: u32) {
         let ts = TILE_SIZE as usize;
         self.tiles_x = (width as usize).div_ceil(ts);
@@ -81,8 +94,14 @@ impl Bins {
             .par_extend(self.keys.par_iter().map(|&k| k as u32));
         self.rank_of.clear();
         self.rank_of.resize(proj.len(), u32::MAX);
+        self.slot_start.clear();
+        self.slot_start.push(0);
+        let mut slots = 0;
         for (rank, &gid) in self.order.iter().enumerate() {
             self.rank_of[gid as usize] = rank as u32;
+            let [x0, x1, y0, y1] = self.rects[gid as usize];
+            slots += (x1 - x0) as usize * (y1 - y0) as usize;
+            self.slot_start.push(slots);
         }
 
         self.offsets.clear();

@@ -9,6 +9,7 @@
 //! fails) and keeps its final transmittance in `tfin`.
 
 use crate::fastexp;
+use crate::raster::Simd;
 
 pub(crate) const ALPHA_MIN: f32 = 1.0 / 255.0;
 pub(crate) const ALPHA_MAX: f32 = 0.999;
@@ -29,12 +30,17 @@ pub(crate) struct Splat {
     /// Rows with |y − my| > hy cannot reach α ≥ 1/255: there min over x of σ is
     /// ½·dy²·(c − b²/a) > ln(255·o). Negative when o < 1/255 (never visible).
     pub hy: f32,
+    /// 2·ln(255·o) plus a small margin: the row chord test of [`Splat::reaches_row`].
+    pub thr2: f32,
 }
 
 impl Splat {
     pub fn new(mean2d: [f32; 2], conic: [f32; 3], o: f32, rgb: [f32; 3]) -> Self {
         let [a, b, c] = conic;
         let thr = (255.0 * o).ln();
+        // The margin keeps the chord test conservative against f32 rounding of σ and the
+        // polynomial exp (tested in `chord_cull_is_conservative`).
+        let thr2 = 2.0 * thr + 2e-3;
         let hy = if thr < 0.0 {
             -1.0
         } else {
@@ -51,7 +57,22 @@ impl Splat {
             o,
             rgb,
             hy,
+            thr2,
         }
+    }
+
+    /// Whether the row at `dy = my − y` can reach α ≥ 1/255 at a pixel centre of the tile
+    /// columns `[x0 + 0.5, x0 + 15.5]`. In that row σ ≤ thr ⇔ the quadratic
+    /// ½a·dx² + b·dy·dx + ½c·dy² − thr ≤ 0, i.e. pixel x within
+    /// `mx + b·dy/a ± √(2a·thr − dy²(ac − b²))/a`. Rows that fail are skipped whole: for
+    /// them the kernels would composite nothing, so the result is unchanged.
+    #[inline(always)]
+    pub fn reaches_row(&self, dy: f32, x0: f32) -> bool {
+        let disc = self.thr2 * self.a - dy * dy * (self.a * self.c - self.b * self.b);
+        let inv_a = 1.0 / self.a;
+        let half = disc.max(0.0).sqrt() * inv_a * 1.001 + 0.01;
+        let centre = self.mx + self.b * dy * inv_a;
+        centre + half >= x0 + 0.5 && centre - half <= x0 + (TS as f32 - 0.5)
     }
 
     /// Rows `[r0, r1)` of the tile starting at pixel row `y0` that the Gaussian may reach.
@@ -95,7 +116,7 @@ pub(crate) struct TileOut<'a> {
 /// Renders one tile; returns the number of (pixel, Gaussian) pairs evaluated.
 /// `list` holds depth ranks indexing `splats`; `gids` maps a rank to its global index.
 pub(crate) fn render_tile(
-    avx2: bool,
+    simd: Simd,
     ctx: &TileCtx,
     list: &[u32],
     splats: &[Splat],
@@ -103,17 +124,26 @@ pub(crate) fn render_tile(
     out: TileOut,
 ) -> u64 {
     #[cfg(target_arch = "x86_64")]
-    if avx2 {
-        // SAFETY: the caller checked that the CPU supports AVX2 and FMA.
-        return unsafe {
-            if ctx.k > 0 {
+    match simd {
+        // SAFETY: `simd_level` checked that the CPU supports these features.
+        Simd::Avx512 => unsafe {
+            return if ctx.k > 0 {
+                tile_avx512::<true>(ctx, list, splats, gids, out)
+            } else {
+                tile_avx512::<false>(ctx, list, splats, gids, out)
+            };
+        },
+        // SAFETY: as above.
+        Simd::Avx2 => unsafe {
+            return if ctx.k > 0 {
                 tile_avx2::<true>(ctx, list, splats, gids, out)
             } else {
                 tile_avx2::<false>(ctx, list, splats, gids, out)
-            }
-        };
+            };
+        },
+        Simd::Portable => {}
     }
-    let _ = avx2;
+    let _ = simd;
     if ctx.k > 0 {
         tile_impl::<true>(ctx, list, splats, gids, out)
     } else {
@@ -124,6 +154,18 @@ pub(crate) fn render_tile(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn tile_avx2<const TOPK: bool>(
+    ctx: &TileCtx,
+    list: &[u32],
+    splats: &[Splat],
+    gids: &[u32],
+    out: TileOut,
+) -> u64 {
+    tile_impl::<TOPK>(ctx, list, splats, gids, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn tile_avx512<const TOPK: bool>(
     ctx: &TileCtx,
     list: &[u32],
     splats: &[Splat],
@@ -182,8 +224,11 @@ fn tile_impl<const TOPK: bool>(
             if !s.live[r] {
                 continue;
             }
-            pairs += TS as u64;
             let dy = sp.my - (ctx.y0 as f32 + r as f32 + 0.5);
+            if !sp.reaches_row(dy, ctx.x0 as f32) {
+                continue;
+            }
+            pairs += TS as u64;
             let span = r * TS..(r + 1) * TS;
             let row = Row {
                 t: (&mut s.t[span.clone()]).try_into().expect("16"),
@@ -298,5 +343,59 @@ fn finish(ctx: &TileCtx, s: &State, out: TileOut) {
         for c in 0..3 {
             out.color[c * TP + p] = s.col[c][p] + t * ctx.bg[c];
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// Every row that [`Splat::reaches_row`] rejects composites nothing in the kernel's own
+    /// arithmetic (σ and the polynomial exp in f32), for elongated, rotated, faint and
+    /// opaque Gaussians placed around a tile: skipping such rows cannot change an image.
+    #[test]
+    fn chord_cull_is_conservative() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let (mut rejected, mut near_miss) = (0u64, 0u64);
+        for _ in 0..200_000 {
+            let (s1, s2) = (rng.gen_range(0.3f32..40.0), rng.gen_range(0.3f32..40.0));
+            let th = rng.gen_range(0.0f32..std::f32::consts::PI);
+            let (c, s) = (th.cos(), th.sin());
+            // Covariance R diag(s1², s2²) Rᵀ, conic = its inverse.
+            let (xx, yy) = (
+                c * c * s1 * s1 + s * s * s2 * s2,
+                s * s * s1 * s1 + c * c * s2 * s2,
+            );
+            let xy = c * s * (s1 * s1 - s2 * s2);
+            let det = xx * yy - xy * xy;
+            let conic = [yy / det, -xy / det, xx / det];
+            let o = rng.gen_range(0.003f32..1.0);
+            let mean = [rng.gen_range(-60.0f32..76.0), rng.gen_range(-60.0f32..76.0)];
+            let sp = Splat::new(mean, conic, o, [1.0; 3]);
+            let (r0, r1) = sp.rows(0);
+            for r in r0..r1 {
+                let dy = sp.my - (r as f32 + 0.5);
+                if sp.reaches_row(dy, 0.0) {
+                    continue;
+                }
+                rejected += 1;
+                for l in 0..TS {
+                    let dx = sp.mx - (l as f32 + 0.5);
+                    let sigma = 0.5 * (sp.a * dx * dx + sp.c * dy * dy) + sp.b * dx * dy;
+                    let alpha = (sp.o * fastexp::exp(-sigma)).min(ALPHA_MAX);
+                    assert!(
+                        !(sigma >= 0.0 && alpha >= ALPHA_MIN),
+                        "row {r} lane {l} rejected but α = {alpha} for {sp:?}"
+                    );
+                    near_miss += (alpha >= 0.9 * ALPHA_MIN) as u64;
+                }
+            }
+        }
+        // The test must exercise the boundary, not only far-away rows.
+        assert!(
+            rejected > 10_000 && near_miss > 100,
+            "{rejected} {near_miss}"
+        );
     }
 }

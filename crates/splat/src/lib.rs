@@ -21,6 +21,7 @@ pub mod camera;
 mod error;
 mod fastexp;
 mod forward;
+mod grad_slots;
 mod project;
 mod raster;
 pub mod reference;
@@ -29,7 +30,7 @@ mod validate;
 
 pub use camera::Camera;
 pub use error::SplatError;
-pub use raster::{Rasterizer, Timings};
+pub use raster::{simd_level, Rasterizer, Simd, Timings};
 
 /// Side of a square tile in pixels.
 pub const TILE_SIZE: u32 = 16;

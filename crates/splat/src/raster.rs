@@ -4,11 +4,11 @@
 use crate::backward::{backward_tile, GradAcc, TileGradIn};
 use crate::bin::Bins;
 use crate::forward::{render_tile, Splat, TileCtx, TileOut, TP, TS};
+use crate::grad_slots::{GradSlots, SlotWriter};
 use crate::project::{project, project_vjp, CamInfo, GaussGradMut, ProjGrad, Projected};
 use crate::validate::{validate_backward, validate_forward};
 use crate::{Camera, Colors, ForwardOutput, Gaussians, Gradients, RenderOptions, SplatError};
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 /// Wall-clock seconds of the phases of the last [`Rasterizer::forward`] or
@@ -17,11 +17,11 @@ use std::time::Instant;
 pub struct Timings {
     /// Forward: projection + SH. Backward: projection and SH backward.
     pub project: f64,
-    /// Forward: tile binning and depth sort. Backward: reduction of per-thread sums.
+    /// Forward: tile binning and depth sort. Backward: fixed-order sum of the tile slots.
     pub bin: f64,
     /// Tile rasterization (forward or backward kernels).
     pub raster: f64,
-    /// Forward: copy to row-major outputs. Backward: zeroing accumulators.
+    /// Forward: copy to row-major outputs. Backward: zeroing the gradient slots.
     pub finish: f64,
 }
 
@@ -43,23 +43,40 @@ pub struct Rasterizer {
     alpha: Vec<f32>,
     topk_ids: Vec<u32>,
     topk_weights: Vec<f32>,
-    accs: Vec<Vec<GradAcc>>,
+    slots: GradSlots,
     proj_grads: Vec<GradAcc>,
     fwd_pairs: u64,
     timings: Timings,
     /// (N, width, height) of the last forward pass.
     shape: Option<(usize, u32, u32)>,
+    /// Upper bound on the vector level (None: the widest the CPU has).
+    simd_cap: Option<Simd>,
 }
 
-fn has_avx2() -> bool {
+/// Widest vector level the tile kernels may use on this CPU (detected at run time, so
+/// one build runs everywhere).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Simd {
+    Portable,
+    /// AVX2 + FMA: a 16-pixel row is two 8-lane vectors.
+    Avx2,
+    /// AVX-512F (+ AVX2/FMA): a row is one 16-lane vector.
+    Avx512,
+}
+
+/// The widest level this CPU supports.
+pub fn simd_level() -> Simd {
     #[cfg(target_arch = "x86_64")]
     {
-        is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
+        let avx2 = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
+        if avx2 && is_x86_feature_detected!("avx512f") {
+            return Simd::Avx512;
+        }
+        if avx2 {
+            return Simd::Avx2;
+        }
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
+    Simd::Portable
 }
 
 impl Rasterizer {
@@ -71,6 +88,18 @@ impl Rasterizer {
     /// Gaussian's alpha can reach, in tiles where pixels were still unfinished).
     pub fn evaluated_pairs(&self) -> u64 {
         self.fwd_pairs
+    }
+
+    /// Caps the tile kernels' vector level (for A/B timings and the test that all levels
+    /// give bit-identical results); the CPU's own limit still applies.
+    pub fn set_simd_cap(&mut self, cap: Simd) {
+        self.simd_cap = Some(cap);
+    }
+
+    /// The vector level the tile kernels use.
+    pub fn simd(&self) -> Simd {
+        let detected = simd_level();
+        self.simd_cap.map_or(detected, |c| c.min(detected))
     }
 
     /// Phase timings of the last forward or backward call.
@@ -141,11 +170,11 @@ impl Rasterizer {
         resize(&mut self.tile_last, n_tiles * TP, 0);
         resize(&mut self.tile_topk_ids, n_tiles * TP * k, u32::MAX);
         resize(&mut self.tile_topk_w, n_tiles * TP * k, 0.0);
-        let avx2 = has_avx2();
+        let simd = self.simd();
         let (bins, splats) = (&self.bins, &self.splats);
         let run = |tile: usize, out: TileOut| {
             let ctx = tile_ctx(tile, bins.tiles_x, cam, opts);
-            render_tile(avx2, &ctx, bins.tile_list(tile), splats, &bins.order, out)
+            render_tile(simd, &ctx, bins.tile_list(tile), splats, &bins.order, out)
         };
         let main = self
             .tile_color
@@ -243,11 +272,13 @@ impl Rasterizer {
     ) -> Result<(), SplatError> {
         validate_backward(g, cam, self.shape, dl_dimage, dl_dalpha)?;
         let t0 = Instant::now();
-        self.zero_accs();
+        let mut slots = std::mem::take(&mut self.slots);
+        let writer = slots.reset(self.bins.n_isects());
         let t1 = Instant::now();
-        self.accumulate_tiles(cam, opts, dl_dimage, dl_dalpha);
+        self.accumulate_tiles(&writer, cam, opts, dl_dimage, dl_dalpha);
+        self.slots = slots;
         let t2 = Instant::now();
-        self.reduce_accs(g.len());
+        self.reduce_slots(g.len());
         let t3 = Instant::now();
         self.project_backward(g, cam, opts, grads);
         self.timings = Timings {
@@ -259,41 +290,28 @@ impl Rasterizer {
         Ok(())
     }
 
-    /// One zeroed gradient accumulator per rayon thread.
-    fn zero_accs(&mut self) {
-        let n = self.bins.order.len();
-        let threads = rayon::current_num_threads().max(1);
-        self.accs.resize_with(threads, Vec::new);
-        self.accs
-            .par_iter_mut()
-            .for_each(|a| resize(a, n, [0.0; 9]));
-    }
-
     fn accumulate_tiles(
-        &mut self,
+        &self,
+        slots: &SlotWriter,
         cam: &Camera,
         opts: &RenderOptions,
         dl_dimage: &[f32],
         dl_dalpha: Option<&[f32]>,
     ) {
         let n_tiles = self.bins.tiles_x * self.bins.tiles_y;
-        let next = AtomicUsize::new(0);
-        let avx2 = has_avx2();
+        let simd = self.simd();
         let (bins, splats) = (&self.bins, &self.splats);
         let (tfin, last) = (&self.tile_tfin, &self.tile_last);
         let w = cam.width as usize;
-        // One job per thread pulling tiles from a shared counter: dynamic balance and one
-        // private accumulator per job, so no atomics on gradients.
-        self.accs.par_iter_mut().for_each(|acc| loop {
-            let tile = next.fetch_add(1, Ordering::Relaxed);
-            if tile >= n_tiles {
-                break;
-            }
+        // Tiles in parallel; each stores its per-Gaussian sums in that (Gaussian, tile)'s
+        // own slot, so no two jobs write the same memory and the reduction order is fixed.
+        (0..n_tiles).into_par_iter().for_each(|tile| {
             let list = bins.tile_list(tile);
             if list.is_empty() {
-                continue;
+                return;
             }
-            let (x0, y0) = ((tile % bins.tiles_x) * TS, (tile / bins.tiles_x) * TS);
+            let (tx, ty) = (tile % bins.tiles_x, tile / bins.tiles_x);
+            let (x0, y0) = (tx * TS, ty * TS);
             let mut v_color = [0.0f32; 3 * TP];
             let mut v_alpha_eff = [0.0f32; TP];
             let (cols, rows) = ((w - x0).min(TS), (cam.height as usize - y0).min(TS));
@@ -319,29 +337,29 @@ impl Rasterizer {
                 v_color: &v_color,
                 v_alpha_eff: &v_alpha_eff,
             };
-            backward_tile(avx2, &tin, list, splats, acc);
+            // SAFETY: the slot of (rank, this tile) is written by this tile's job only.
+            let mut emit =
+                |rank: usize, sums: &GradAcc| unsafe { slots.store(bins.slot(rank, tx, ty), sums) };
+            backward_tile(simd, &tin, list, splats, &mut emit);
         });
     }
 
-    fn reduce_accs(&mut self, n: usize) {
+    /// Per-Gaussian sums: each Gaussian adds its tile slots in row-major tile order.
+    fn reduce_slots(&mut self, n: usize) {
         resize(&mut self.proj_grads, n, [0.0; 9]);
-        let (accs, rank_of) = (&self.accs, &self.bins.rank_of);
+        let (slots, rank_of, start) = (&self.slots, &self.bins.rank_of, &self.bins.slot_start);
         self.proj_grads
             .par_chunks_mut(4096)
             .enumerate()
             .for_each(|(ci, out)| {
-                let base = ci * 4096;
                 for (j, o) in out.iter_mut().enumerate() {
-                    let mut s = [0.0f32; 9];
-                    let rank = rank_of[base + j];
-                    if rank != u32::MAX {
-                        for a in accs {
-                            for (sk, ak) in s.iter_mut().zip(&a[rank as usize]) {
-                                *sk += ak;
-                            }
-                        }
-                    }
-                    *o = s;
+                    let rank = rank_of[ci * 4096 + j];
+                    *o = if rank == u32::MAX {
+                        [0.0; 9]
+                    } else {
+                        let r = rank as usize;
+                        slots.sum(start[r]..start[r + 1])
+                    };
                 }
             });
     }

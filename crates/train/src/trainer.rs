@@ -84,8 +84,12 @@ impl Trainer {
         let model = match (&dataset.point_cloud, cfg.init.use_point_cloud) {
             (Some(pc), true) if !pc.is_empty() => {
                 let pos: Vec<f32> = pc.iter().flatten().copied().collect();
-                // The shipped clouds carry no colours here; grey as a neutral start.
-                crate::init::from_points(&pos, &vec![0.5; pos.len()], cfg.init.opacity)
+                // The file's colours as 3DGS does; grey, a neutral start, without them.
+                let rgb: Vec<f32> = match &dataset.point_colors {
+                    Some(c) if c.len() == pc.len() => c.iter().flatten().copied().collect(),
+                    _ => vec![0.5; pos.len()],
+                };
+                crate::init::from_points(&pos, &rgb, cfg.init.opacity)
             }
             _ => crate::init::random(&cfg.init, &mut rng),
         };
@@ -124,6 +128,11 @@ impl Trainer {
     }
 
     /// Whether the field is applied at 1-based iteration `it` (Deformable-3DGS: from `warm_up`).
+    /// (pixel, Gaussian) pairs the rasterizer evaluated in the last forward pass.
+    pub fn evaluated_pairs(&self) -> u64 {
+        self.ws.raster.evaluated_pairs()
+    }
+
     pub fn field_active_at(&self, it: u32) -> bool {
         it >= self.cfg.field.warm_up
     }

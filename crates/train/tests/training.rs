@@ -40,25 +40,33 @@ fn short_training_raises_psnr() {
 }
 
 /// Stop at 40 (during densification, field active), save, reload, finish: every parameter,
-/// moment and the field must equal the uninterrupted run bit for bit. Runs on one rayon
-/// thread: `splat`'s backward currently sums gradients in an order that depends on thread
-/// scheduling (two identical calls differ in the last bits on 2 threads), which is outside
-/// what a checkpoint can capture; the trainer's own code is thread-count independent.
+/// moment and the field must equal the uninterrupted run bit for bit. The uninterrupted run
+/// uses 2 rayon threads and the interrupted one 3: results must not depend on the thread
+/// count either (`splat` sums each Gaussian's gradient over its tiles in a fixed order).
 #[test]
 fn resume_equals_uninterrupted() {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap();
-    pool.install(resume_check);
+    resume_check();
 }
 
 fn resume_check() {
+    let pool = |n: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+    };
     let cfg = common::small_config(80);
-    let mut a = Trainer::new(cfg.clone(), common::dataset(), 3).unwrap();
-    for _ in 0..80 {
-        a.step().unwrap();
-    }
+    let a = pool(2).install(|| {
+        let mut a = Trainer::new(cfg.clone(), common::dataset(), 3).unwrap();
+        for _ in 0..80 {
+            a.step().unwrap();
+        }
+        a
+    });
+    pool(3).install(|| resume_and_compare(cfg, &a));
+}
+
+fn resume_and_compare(cfg: train::TrainConfig, a: &Trainer) {
     let mut b = Trainer::new(cfg, common::dataset(), 3).unwrap();
     for _ in 0..40 {
         b.step().unwrap();
@@ -88,7 +96,7 @@ fn resume_check() {
         v.push(("field.adam.m".into(), t.field_adam.m.clone()));
         v
     };
-    for ((name, x), (_, y)) in named(&a).into_iter().zip(named(&c)) {
+    for ((name, x), (_, y)) in named(a).into_iter().zip(named(&c)) {
         let first = x
             .iter()
             .zip(&y)
@@ -97,4 +105,46 @@ fn resume_check() {
     }
     assert_eq!(a.state.model.sh_degree, c.state.model.sh_degree);
     assert_eq!(a.field_adam.step, c.field_adam.step);
+}
+
+/// A point cloud with colours (3DGS `fetchPly`) starts each Gaussian at its point's colour:
+/// SH DC = RGB2SH(colour); without colours the start is grey.
+#[test]
+fn point_cloud_colours_initialize_sh_dc() {
+    let mut ds = common::dataset();
+    let pts = vec![
+        [0.0, 0.0, 0.0],
+        [0.1, 0.2, 0.0],
+        [-0.2, 0.1, 0.05],
+        [0.3, -0.1, 0.1],
+    ];
+    let rgb = vec![
+        [1.0, 0.0, 0.2],
+        [0.0, 1.0, 0.4],
+        [0.5, 0.5, 0.5],
+        [0.25, 0.75, 1.0],
+    ];
+    ds.point_cloud = Some(pts.clone());
+    ds.point_colors = Some(rgb.clone());
+    let mut cfg = common::small_config(10);
+    cfg.init.use_point_cloud = true;
+    let tr = Trainer::new(cfg.clone(), ds.clone(), 0).unwrap();
+    let m = tr.model();
+    assert_eq!(m.means.len(), 12);
+    let stride = m.sh.len() / pts.len();
+    for (i, c) in rgb.iter().enumerate() {
+        for (k, &ck) in c.iter().enumerate() {
+            let want = (ck - 0.5) / train::init::SH_C0;
+            assert!(
+                (m.sh[i * stride + k] - want).abs() < 1e-6,
+                "point {i} channel {k}"
+            );
+        }
+    }
+    ds.point_colors = None;
+    let tr = Trainer::new(cfg, ds, 0).unwrap();
+    assert!(
+        tr.model().sh.iter().step_by(stride).all(|&v| v == 0.0),
+        "grey start"
+    );
 }

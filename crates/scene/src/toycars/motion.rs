@@ -19,10 +19,12 @@ pub const GROUND_HALF: f32 = 1.25;
 pub struct Layout {
     pub vehicles: Vec<Vehicle>,
     pub moving: usize,
+    /// Fraction of [`path`] driven between t = 0 and t = 1.
+    pub drive: f32,
 }
 
 impl Layout {
-    pub fn new(preset: Preset) -> Self {
+    pub fn new(preset: Preset, drive: f32) -> Self {
         let moving = match preset {
             Preset::Scene1 => 0,
             Preset::Scene2 => 1,
@@ -30,14 +32,15 @@ impl Layout {
         Self {
             vehicles: vec![white_suv(), yellow_sedan(), green_suv()],
             moving,
+            drive,
         }
     }
 
-    /// `(x, y, yaw)` of vehicle `i` at time `t`: the moving one follows [`path`], the others
-    /// take the two parking spots in ID order.
+    /// `(x, y, yaw)` of vehicle `i` at time `t`: the moving one follows the first `drive`
+    /// of [`path`] at constant speed, the others take the two parking spots in ID order.
     pub fn pose(&self, i: usize, t: f32) -> (f32, f32, f32) {
         if i == self.moving {
-            return path(t);
+            return path(t * self.drive);
         }
         const SPOTS: [(f32, f32, f32); 2] = [(-0.15, 0.12, 0.35), (-0.62, 0.62, -1.05)];
         let slot = (0..i).filter(|&k| k != self.moving).count();
@@ -134,6 +137,28 @@ mod tests {
         assert!(d.iter().sum::<f32>() > 1.8);
         let turn = steps[20].2 - steps[0].2;
         assert!(turn > 1.2, "turn {turn}");
+    }
+
+    /// A partial drive is the start of the full route at a proportionally lower speed;
+    /// parked vehicles do not depend on it.
+    #[test]
+    fn partial_drive_follows_the_start_of_the_route() {
+        let (full, quarter) = (
+            Layout::new(Preset::Scene1, 1.0),
+            Layout::new(Preset::Scene1, 0.25),
+        );
+        for i in 0..=8 {
+            let t = i as f32 / 8.0;
+            assert_eq!(quarter.pose(0, t), full.pose(0, t * 0.25));
+            assert_eq!(quarter.pose(1, t), full.pose(1, t));
+            assert_eq!(quarter.pose(2, t), full.pose(2, t));
+        }
+        let ((x0, y0, _), (x1, y1, _)) = (quarter.pose(0, 0.0), quarter.pose(0, 1.0));
+        let covered = (x1 - x0).hypot(y1 - y0);
+        assert!(
+            covered > 0.5 && covered < 0.8,
+            "quarter drive covers {covered}"
+        );
     }
 
     #[test]

@@ -172,7 +172,7 @@ pub fn write_metadata(
     extra.insert(
         "generator".into(),
         json!({"name": "semdynreg synth toycars", "preset": cfg.preset.name(), "seed": cfg.seed,
-               "width": cfg.width, "height": cfg.height, "frames": cfg.frames, "duration_s": 6.0,
+               "drive": cfg.drive, "width": cfg.width, "height": cfg.height, "frames": cfg.frames, "duration_s": 6.0,
                "mask_background": crate::MASK_BACKGROUND, "up_axis": "+z"}),
     );
     ObjectsFile {

@@ -8,7 +8,8 @@
 # and schedule), and prints a Markdown table of the moving-object crop PSNR/SSIM/LPIPS (mean
 # over t = 0…5 s), the static objects' crop PSNR and the deformation-consistency RMS.
 # Settings (environment): BIN (default target/release/semdynreg; build it first with
-# `cargo build --release`), PRESET (scene1), W×H (160×120), FRAMES (96), ITERS (3000),
+# `cargo build --release`), PRESET (scene1), DRIVE (1.0: the fraction of its route the moving
+# vehicle covers, `synth toycars --drive`), W×H (160×120), FRAMES (96), ITERS (3000),
 # SEED (0), POINTS (20000 random initial Gaussians, as `semdynreg demo`), KS ("1 3 8" at λ = LAMBDA_AT_K), LAMBDAS ("0.01 0.1 1" at k = K_AT_LAMBDA).
 # Needs jq for the table. Runs that already finished are reused, so it can be resumed.
 set -euo pipefail
@@ -16,6 +17,7 @@ set -euo pipefail
 OUT=${1:?usage: scripts/ablation.sh OUT_DIR}
 BIN=${BIN:-target/release/semdynreg}
 PRESET=${PRESET:-scene1}
+DRIVE=${DRIVE:-1.0}
 W=${W:-160}
 H=${H:-120}
 FRAMES=${FRAMES:-96}
@@ -34,7 +36,7 @@ mkdir -p "$OUT"
 SCENE="$OUT/scene"
 if [ ! -f "$SCENE/objects.json" ]; then
   "$BIN" synth toycars --out "$SCENE" --preset "$PRESET" --width "$W" --height "$H" \
-    --frames "$FRAMES" --seed "$SEED"
+    --frames "$FRAMES" --seed "$SEED" --drive "$DRIVE"
 fi
 "$BIN" segment "$SCENE" --dict "$DICT" --masks gt --labels gt
 

@@ -170,3 +170,18 @@ fn bad_config_is_refused() {
         .to_string();
     assert!(e.contains("frame count 1"), "{e}");
 }
+
+#[test]
+fn drive_fraction_outside_0_1_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    for bad in [0.0, -0.5, 1.5, f32::NAN] {
+        let cfg = ToycarsConfig {
+            drive: bad,
+            ..tiny(Preset::Scene1, 0)
+        };
+        let e = generate(&cfg, dir.path(), &|_, _| {})
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("drive fraction"), "{bad}: {e}");
+    }
+}

@@ -29,6 +29,11 @@ pub struct Args {
     pub points: usize,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Fraction of its ~2.6-unit route the white SUV drives in the 6 s (`synth toycars
+    /// --drive`): 1 is the full drive, 0.25 a slower one the baseline can follow. Used when
+    /// OUT/scene is generated; an existing OUT/scene is reused as it is.
+    #[arg(long, default_value_t = 1.0)]
+    pub drive: f32,
     /// Object-ID maps: `gt` (the scene's ground-truth instance masks: the default, since SAM
     /// over every training frame takes minutes per frame on 2 cores and no package ships
     /// CLIP weights), `sam` (MobileSAM masks labelled by ground truth), or `sam-clip`
@@ -105,6 +110,8 @@ pub fn run(a: Args) -> Result<()> {
             s(a.frames),
             s("--seed"),
             s(a.seed),
+            s("--drive"),
+            s(a.drive),
         ])?;
     }
     let source = id_maps(&scene_s, &a)?;

@@ -72,6 +72,13 @@ fn compare_trains_both_runs_and_reports_every_key() {
         );
         let rms = key(&results, &format!("{run}.deformation_consistency_rms"));
         assert!(rms.as_f64().is_some_and(f64::is_finite), "{run}: {rms}");
+        let per = key(
+            &results,
+            &format!("{run}.deformation_consistency_per_object"),
+        );
+        let per = per.as_object().unwrap();
+        assert!(per.contains_key("white-suv"), "{run}: {per:?}");
+        assert!(per.values().all(|v| v.as_f64().is_some_and(f64::is_finite)));
     }
     // Only the SemDynReg run logs the regularizer, and only inside its window.
     let log = |run: &str| std::fs::read_to_string(out.join(run).join("metrics.jsonl")).unwrap();

@@ -16,6 +16,7 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use train::regularizer::ConsistencyReport;
 
 /// Baseline vs SemDynReg on a scene: results.json, report.md, report.html.
 #[derive(clap::Args, Debug)]
@@ -196,8 +197,16 @@ fn evaluate_and_report(args: &Args, runs: Runs) -> Result<()> {
     let mut ours_results = ours.results;
     match &runs.run_dirs {
         Some([b, o]) => {
-            base_results.deformation_consistency_rms = consistency(b, &mut notes);
-            ours_results.deformation_consistency_rms = consistency(o, &mut notes);
+            for (run, res) in [(b, &mut base_results), (o, &mut ours_results)] {
+                if let Some(r) = consistency(run, &mut notes) {
+                    res.deformation_consistency_rms = Some(r.rms);
+                    res.deformation_consistency_per_object = r
+                        .per_object
+                        .iter()
+                        .map(|x| (object_name(&set, x.object), x.rms))
+                        .collect();
+                }
+            }
         }
         None => notes.push(
             "deformation_consistency_rms is null: it needs the trained models, not only their renders".into(),
@@ -242,10 +251,18 @@ fn evaluate_and_report(args: &Args, runs: Runs) -> Result<()> {
     Ok(())
 }
 
-/// The run's consistency RMS, or `None` with the reason added to `notes`.
-fn consistency(run: &Path, notes: &mut Vec<String>) -> Option<f64> {
+/// The name `objects.json` gives object `id` (its number when it has none).
+fn object_name(set: &EvalSet, id: u8) -> String {
+    set.objects
+        .iter()
+        .find(|o| o.id == id)
+        .map_or_else(|| id.to_string(), |o| o.name.clone())
+}
+
+/// The run's consistency report, or `None` with the reason added to `notes`.
+fn consistency(run: &Path, notes: &mut Vec<String>) -> Option<ConsistencyReport> {
     match run_consistency(run) {
-        Ok(r) => Some(r.rms),
+        Ok(r) => Some(r),
         Err(e) => {
             notes.push(format!(
                 "deformation consistency of {} not computed: {e:#}",

@@ -62,6 +62,10 @@ pub struct MethodResults {
     /// positions under the ground-truth rigid motion, averaged over test times; lower is
     /// better. `null` when not computed (see `notes`).
     pub deformation_consistency_rms: Option<f64>,
+    /// The same per vehicle (keyed by its name in `objects.json`): the moving vehicle's
+    /// value is the one the regularizer is meant to lower. Empty when not computed.
+    #[serde(default)]
+    pub deformation_consistency_per_object: BTreeMap<String, f64>,
     /// Where the rendered frames came from.
     pub renders: String,
 }

@@ -36,13 +36,17 @@ pub struct Mlp {
 #[derive(Clone, Debug, Default)]
 pub struct MlpCache {
     rows: usize,
-    /// Post-ReLU output of each hidden layer, `rows × width`.
-    acts: Vec<Vec<f32>>,
+    /// Post-ReLU outputs of the hidden layers, chunk-major: row chunk `c` (ROW_CHUNK rows,
+    /// `n` in the last) holds `depth` blocks of `n × width`, layer after layer, so that one
+    /// chunk's whole pass stays in cache.
+    acts: Vec<f32>,
     /// `rows × out_dim`.
     pub out: Vec<f32>,
-    scratch_a: Vec<f32>,
-    scratch_b: Vec<f32>,
 }
+
+/// Row chunks per backward job: each job owns one partial parameter gradient, summed in
+/// job order at the end (fixed by the row count, so thread-count independent).
+const CHUNKS_PER_JOB: usize = 8;
 
 impl Mlp {
     /// PyTorch `nn.Linear` default init: weights and biases U(−1/√fan_in, 1/√fan_in).
@@ -110,67 +114,81 @@ impl Mlp {
     }
 
     /// Forward over `rows` rows of `input` (`rows × in_dim`); the result is `cache.out`.
+    /// Chunk-major: each chunk of ROW_CHUNK rows goes through every layer before the next
+    /// (its activations stay in L2 instead of streaming `rows × width` per layer).
     pub fn forward(&self, input: &[f32], rows: usize, cache: &mut MlpCache) {
         assert_eq!(input.len(), rows * self.in_dim, "MLP input size");
         cache.rows = rows;
-        cache.acts.resize(self.depth, Vec::new());
-        for l in 0..=self.depth {
-            let (prev, rest) = cache.acts.split_at_mut(l.min(self.depth));
-            let out: &mut Vec<f32> = if l == self.depth {
-                &mut cache.out
-            } else {
-                &mut rest[0]
-            };
-            let h_in: &[f32] = if l == 0 { input } else { &prev[l - 1] };
-            let fo = self.layers[l].fan_out;
-            out.resize(rows * fo, 0.0);
-            self.layer_forward(l, input, h_in, out, l < self.depth);
-        }
-    }
-
-    /// `out = relu?(h_in·W_h [+ input·W_x] + b)` for layer `l`, parallel over row chunks.
-    fn layer_forward(&self, l: usize, input: &[f32], h_in: &[f32], out: &mut [f32], relu: bool) {
-        let ly = self.layers[l];
-        let w = self.weights(l);
-        let b = self.bias(l);
-        let is_skip = l > 0 && Some(l - 1) == self.skip;
-        let h_dim = if l == 0 { self.in_dim } else { self.width };
-        let (w_x, w_h) = if is_skip {
-            w.split_at(self.in_dim * ly.fan_out)
-        } else {
-            (&[][..], w)
-        };
-        out.par_chunks_mut(ROW_CHUNK * ly.fan_out)
+        let (w, depth) = (self.width, self.depth);
+        cache.acts.resize(rows * w * depth, 0.0);
+        cache.out.resize(rows * self.out_dim, 0.0);
+        cache
+            .out
+            .par_chunks_mut(ROW_CHUNK * self.out_dim)
+            .zip(cache.acts.par_chunks_mut(ROW_CHUNK * w * depth))
             .enumerate()
-            .for_each(|(c, o)| {
-                let r0 = c * ROW_CHUNK;
-                let n = o.len() / ly.fan_out;
-                let hin = &h_in[r0 * h_dim..(r0 + n) * h_dim];
-                matmul(
-                    o,
-                    Mat::row_major(hin, n, h_dim),
-                    Mat::row_major(w_h, h_dim, ly.fan_out),
-                    false,
-                );
-                if is_skip {
-                    let xin = &input[r0 * self.in_dim..(r0 + n) * self.in_dim];
-                    let wx = Mat::row_major(w_x, self.in_dim, ly.fan_out);
-                    matmul(o, Mat::row_major(xin, n, self.in_dim), wx, true);
-                }
-                for row in o.chunks_exact_mut(ly.fan_out) {
-                    for (v, bb) in row.iter_mut().zip(b) {
-                        *v += bb;
-                        if relu && *v < 0.0 {
-                            *v = 0.0;
-                        }
-                    }
+            .for_each(|(c, (out, acts))| {
+                let n = out.len() / self.out_dim;
+                let x = &input[c * ROW_CHUNK * self.in_dim..][..n * self.in_dim];
+                for l in 0..=depth {
+                    let (prev, rest) = acts.split_at_mut(l.min(depth) * n * w);
+                    let h_in = if l == 0 { x } else { &prev[(l - 1) * n * w..] };
+                    let o = if l == depth {
+                        &mut *out
+                    } else {
+                        &mut rest[..n * w]
+                    };
+                    self.layer_forward(l, x, h_in, n, o, l < depth);
                 }
             });
     }
 
+    /// `out = relu?(h_in·W_h [+ x·W_x] + b)` for layer `l` over `n` rows.
+    fn layer_forward(
+        &self,
+        l: usize,
+        x: &[f32],
+        h_in: &[f32],
+        n: usize,
+        o: &mut [f32],
+        relu: bool,
+    ) {
+        let ly = self.layers[l];
+        let (w_x, w_h) = self.split_weights(l);
+        let h_dim = if l == 0 { self.in_dim } else { self.width };
+        let hin = Mat::row_major(&h_in[..n * h_dim], n, h_dim);
+        matmul(o, hin, Mat::row_major(w_h, h_dim, ly.fan_out), false);
+        if !w_x.is_empty() {
+            let wx = Mat::row_major(w_x, self.in_dim, ly.fan_out);
+            matmul(o, Mat::row_major(x, n, self.in_dim), wx, true);
+        }
+        let b = self.bias(l);
+        for row in o.chunks_exact_mut(ly.fan_out) {
+            for (v, bb) in row.iter_mut().zip(b) {
+                *v += bb;
+                if relu && *v < 0.0 {
+                    *v = 0.0;
+                }
+            }
+        }
+    }
+
+    /// Layer `l`'s weights split into the rows for the re-fed input (skip layer only,
+    /// else empty) and the rows for the previous layer's output.
+    fn split_weights(&self, l: usize) -> (&[f32], &[f32]) {
+        let w = self.weights(l);
+        if l > 0 && Some(l - 1) == self.skip {
+            w.split_at(self.in_dim * self.layers[l].fan_out)
+        } else {
+            (&[][..], w)
+        }
+    }
+
     /// Gradient of the parameters given `d_out` (`rows × out_dim`) for the input of the
     /// last forward. `grad` is overwritten. No gradient w.r.t. the input: Deformable-3DGS
-    /// feeds the field detached canonical means (DESIGN.md "Deformation").
+    /// feeds the field detached canonical means (DESIGN.md "Deformation"). Chunk-major like
+    /// the forward pass; each job of CHUNKS_PER_JOB chunks sums into its own partial
+    /// gradient, and the partials are added in job order.
     pub fn backward(
         &self,
         input: &[f32],
@@ -180,106 +198,100 @@ impl Mlp {
     ) {
         let rows = cache.rows;
         assert_eq!(d_out.len(), rows * self.out_dim, "MLP d_out size");
-        grad.clear();
-        grad.resize(self.params.len(), 0.0);
-        let mut dz = std::mem::take(&mut cache.scratch_a);
-        let mut dh = std::mem::take(&mut cache.scratch_b);
-        dz.clear();
-        dz.extend_from_slice(d_out);
-        for l in (0..=self.depth).rev() {
-            if l < self.depth {
-                // ReLU: the stored output is > 0 exactly where the pre-activation was.
-                dz.par_chunks_mut(ROW_CHUNK * self.width)
-                    .zip(cache.acts[l].par_chunks(ROW_CHUNK * self.width))
-                    .for_each(|(d, a)| {
-                        for (x, &y) in d.iter_mut().zip(a) {
-                            if y <= 0.0 {
-                                *x = 0.0;
-                            }
-                        }
-                    });
-            }
-            let h_in: &[f32] = if l == 0 { input } else { &cache.acts[l - 1] };
-            self.layer_param_grad(l, input, h_in, &dz, rows, grad);
-            if l > 0 {
-                self.layer_input_grad(l, &dz, rows, &mut dh);
-                std::mem::swap(&mut dz, &mut dh);
-            }
-        }
-        cache.scratch_a = dz;
-        cache.scratch_b = dh;
-    }
-
-    /// dW = inputᵀ·dz and db = Σ_rows dz, summed over fixed row chunks in a fixed order.
-    fn layer_param_grad(
-        &self,
-        l: usize,
-        input: &[f32],
-        h_in: &[f32],
-        dz: &[f32],
-        rows: usize,
-        grad: &mut [f32],
-    ) {
-        let ly = self.layers[l];
-        let is_skip = l > 0 && Some(l - 1) == self.skip;
-        let h_dim = if l == 0 { self.in_dim } else { self.width };
-        let fo = ly.fan_out;
-        let n_chunks = rows.div_ceil(ROW_CHUNK * 8).max(1);
-        let per = rows.div_ceil(n_chunks);
-        let partials: Vec<Vec<f32>> = (0..n_chunks)
+        let job_rows = ROW_CHUNK * CHUNKS_PER_JOB;
+        let jobs = rows.div_ceil(job_rows).max(1);
+        let cache = &*cache;
+        let partials: Vec<Vec<f32>> = (0..jobs)
             .into_par_iter()
-            .map(|c| {
-                let r0 = (c * per).min(rows);
-                let r1 = ((c + 1) * per).min(rows);
-                let n = r1 - r0;
-                let mut g = vec![0.0; ly.fan_in * fo + fo];
-                let dzc = Mat::row_major(&dz[r0 * fo..r1 * fo], n, fo);
-                let (gx, gh) =
-                    g[..ly.fan_in * fo].split_at_mut(if is_skip { self.in_dim * fo } else { 0 });
-                let hin = Mat::row_major(&h_in[r0 * h_dim..r1 * h_dim], n, h_dim);
-                matmul(gh, hin.t(), dzc, false);
-                if is_skip {
-                    let xin =
-                        Mat::row_major(&input[r0 * self.in_dim..r1 * self.in_dim], n, self.in_dim);
-                    matmul(gx, xin.t(), dzc, false);
-                }
-                let gb = &mut g[ly.fan_in * fo..];
-                for row in dz[r0 * fo..r1 * fo].chunks_exact(fo) {
-                    for (b, d) in gb.iter_mut().zip(row) {
-                        *b += d;
-                    }
+            .map(|j| {
+                let mut g = vec![0.0; self.params.len()];
+                let (r0, r1) = (j * job_rows, ((j + 1) * job_rows).min(rows));
+                let mut bufs = (Vec::new(), Vec::new());
+                for c0 in (r0..r1).step_by(ROW_CHUNK) {
+                    let n = (r1 - c0).min(ROW_CHUNK);
+                    self.chunk_backward(input, d_out, cache, c0, n, &mut g, &mut bufs);
                 }
                 g
             })
             .collect();
-        let dst = &mut grad[ly.w_off..ly.b_off + fo];
+        grad.clear();
+        grad.resize(self.params.len(), 0.0);
         for p in &partials {
-            for (d, s) in dst.iter_mut().zip(p) {
+            for (d, s) in grad.iter_mut().zip(p) {
                 *d += s;
             }
         }
     }
 
-    /// Gradient w.r.t. the hidden input of layer `l` (l ≥ 1): dh = dz·W_hᵀ.
-    fn layer_input_grad(&self, l: usize, dz: &[f32], rows: usize, dh: &mut Vec<f32>) {
+    /// Backward of the `n` rows starting at `c0` (one forward chunk) into `g`.
+    #[allow(clippy::too_many_arguments)]
+    fn chunk_backward(
+        &self,
+        input: &[f32],
+        d_out: &[f32],
+        cache: &MlpCache,
+        c0: usize,
+        n: usize,
+        g: &mut [f32],
+        (dz, dh): &mut (Vec<f32>, Vec<f32>),
+    ) {
+        let (w, depth) = (self.width, self.depth);
+        let acts = &cache.acts[c0 * w * depth..][..n * w * depth];
+        let x = &input[c0 * self.in_dim..][..n * self.in_dim];
+        dz.clear();
+        dz.extend_from_slice(&d_out[c0 * self.out_dim..][..n * self.out_dim]);
+        for l in (0..=depth).rev() {
+            if l < depth {
+                // ReLU: the stored output is > 0 exactly where the pre-activation was.
+                for (d, &a) in dz.iter_mut().zip(&acts[l * n * w..][..n * w]) {
+                    if a <= 0.0 {
+                        *d = 0.0;
+                    }
+                }
+            }
+            let h_in = if l == 0 {
+                x
+            } else {
+                &acts[(l - 1) * n * w..][..n * w]
+            };
+            self.layer_param_grad(l, x, h_in, dz, n, g);
+            if l > 0 {
+                let ly = self.layers[l];
+                let (_, w_h) = self.split_weights(l);
+                dh.resize(n * w, 0.0);
+                let d = Mat::row_major(dz, n, ly.fan_out);
+                matmul(dh, d, Mat::row_major(w_h, w, ly.fan_out).t(), false);
+                std::mem::swap(dz, dh);
+            }
+        }
+    }
+
+    /// Adds dW = inputᵀ·dz and db = Σ_rows dz of layer `l` over `n` rows into `g`.
+    fn layer_param_grad(
+        &self,
+        l: usize,
+        x: &[f32],
+        h_in: &[f32],
+        dz: &[f32],
+        n: usize,
+        g: &mut [f32],
+    ) {
         let ly = self.layers[l];
-        let is_skip = Some(l - 1) == self.skip;
-        let w = self.weights(l);
-        let w_h = if is_skip {
-            &w[self.in_dim * ly.fan_out..]
-        } else {
-            w
-        };
-        let wm = Mat::row_major(w_h, self.width, ly.fan_out).t();
-        dh.resize(rows * self.width, 0.0);
-        dh.par_chunks_mut(ROW_CHUNK * self.width)
-            .enumerate()
-            .for_each(|(c, o)| {
-                let r0 = c * ROW_CHUNK;
-                let n = o.len() / self.width;
-                let d = Mat::row_major(&dz[r0 * ly.fan_out..(r0 + n) * ly.fan_out], n, ly.fan_out);
-                matmul(o, d, wm, false);
-            });
+        let fo = ly.fan_out;
+        let is_skip = l > 0 && Some(l - 1) == self.skip;
+        let h_dim = if l == 0 { self.in_dim } else { self.width };
+        let dzm = Mat::row_major(dz, n, fo);
+        let (gw, gb) = g[ly.w_off..ly.b_off + fo].split_at_mut(ly.fan_in * fo);
+        let (gx, gh) = gw.split_at_mut(if is_skip { self.in_dim * fo } else { 0 });
+        matmul(gh, Mat::row_major(h_in, n, h_dim).t(), dzm, true);
+        if is_skip {
+            matmul(gx, Mat::row_major(x, n, self.in_dim).t(), dzm, true);
+        }
+        for row in dz.chunks_exact(fo) {
+            for (b, d) in gb.iter_mut().zip(row) {
+                *b += d;
+            }
+        }
     }
 }
 
@@ -348,5 +360,25 @@ mod tests {
         let mut b = MlpCache::default();
         pool.install(|| mlp.forward(&x, 3000, &mut b));
         assert_eq!(a.out, b.out);
+        // The backward too: 3000 rows are several chunks but one job, so also check a
+        // multi-job size.
+        let rows = 2 * ROW_CHUNK * CHUNKS_PER_JOB + 77;
+        let x: Vec<f32> = (0..rows * 7).map(|_| rng.gen_range(-1.0..1.0)).collect();
+        let d: Vec<f32> = (0..rows * 10).map(|_| rng.gen_range(-1.0..1.0)).collect();
+        let grads = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let (mut c, mut g) = (MlpCache::default(), Vec::new());
+                mlp.forward(&x, rows, &mut c);
+                mlp.backward(&x, &d, &mut c, &mut g);
+                g
+            })
+        };
+        let g1 = grads(1);
+        assert!(g1.iter().any(|&v| v != 0.0));
+        assert_eq!(g1, grads(3));
     }
 }

@@ -42,6 +42,16 @@ pub struct MlpCache {
     acts: Vec<f32>,
     /// `rows × out_dim`.
     pub out: Vec<f32>,
+    /// Backward jobs' buffers, reused across calls: partial parameter gradient and two
+    /// chunk-sized scratch buffers for dL/dz and dL/dh.
+    jobs: Vec<JobBuffers>,
+}
+
+#[derive(Clone, Debug, Default)]
+struct JobBuffers {
+    grad: Vec<f32>,
+    dz: Vec<f32>,
+    dh: Vec<f32>,
 }
 
 /// Row chunks per backward job: each job owns one partial parameter gradient, summed in
@@ -200,43 +210,41 @@ impl Mlp {
         assert_eq!(d_out.len(), rows * self.out_dim, "MLP d_out size");
         let job_rows = ROW_CHUNK * CHUNKS_PER_JOB;
         let jobs = rows.div_ceil(job_rows).max(1);
-        let cache = &*cache;
-        let partials: Vec<Vec<f32>> = (0..jobs)
-            .into_par_iter()
-            .map(|j| {
-                let mut g = vec![0.0; self.params.len()];
-                let (r0, r1) = (j * job_rows, ((j + 1) * job_rows).min(rows));
-                let mut bufs = (Vec::new(), Vec::new());
-                for c0 in (r0..r1).step_by(ROW_CHUNK) {
-                    let n = (r1 - c0).min(ROW_CHUNK);
-                    self.chunk_backward(input, d_out, cache, c0, n, &mut g, &mut bufs);
-                }
-                g
-            })
-            .collect();
+        let MlpCache {
+            acts, jobs: bufs, ..
+        } = cache;
+        bufs.resize_with(jobs, JobBuffers::default);
+        bufs.par_iter_mut().enumerate().for_each(|(j, b)| {
+            b.grad.clear();
+            b.grad.resize(self.params.len(), 0.0);
+            let (r0, r1) = (j * job_rows, ((j + 1) * job_rows).min(rows));
+            for c0 in (r0..r1).step_by(ROW_CHUNK) {
+                let n = (r1 - c0).min(ROW_CHUNK);
+                self.chunk_backward(input, d_out, acts, c0, n, b);
+            }
+        });
         grad.clear();
         grad.resize(self.params.len(), 0.0);
-        for p in &partials {
-            for (d, s) in grad.iter_mut().zip(p) {
+        for b in bufs.iter() {
+            for (d, s) in grad.iter_mut().zip(&b.grad) {
                 *d += s;
             }
         }
     }
 
-    /// Backward of the `n` rows starting at `c0` (one forward chunk) into `g`.
-    #[allow(clippy::too_many_arguments)]
+    /// Backward of the `n` rows starting at `c0` (one forward chunk) into `b.grad`.
     fn chunk_backward(
         &self,
         input: &[f32],
         d_out: &[f32],
-        cache: &MlpCache,
+        acts: &[f32],
         c0: usize,
         n: usize,
-        g: &mut [f32],
-        (dz, dh): &mut (Vec<f32>, Vec<f32>),
+        b: &mut JobBuffers,
     ) {
+        let JobBuffers { grad: g, dz, dh } = b;
         let (w, depth) = (self.width, self.depth);
-        let acts = &cache.acts[c0 * w * depth..][..n * w * depth];
+        let acts = &acts[c0 * w * depth..][..n * w * depth];
         let x = &input[c0 * self.in_dim..][..n * self.in_dim];
         dz.clear();
         dz.extend_from_slice(&d_out[c0 * self.out_dim..][..n * self.out_dim]);

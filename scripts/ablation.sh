@@ -10,7 +10,9 @@
 # Settings (environment): BIN (default target/release/semdynreg; build it first with
 # `cargo build --release`), PRESET (scene1), DRIVE (1.0: the fraction of its route the moving
 # vehicle covers, `synth toycars --drive`), W×H (160×120), FRAMES (96), ITERS (3000),
-# SEED (0), POINTS (20000 random initial Gaussians, as `semdynreg demo`), KS ("1 3 8" at λ = LAMBDA_AT_K), LAMBDAS ("0.01 0.1 1" at k = K_AT_LAMBDA).
+# SEED (0), POINTS (20000 random initial Gaussians, as `semdynreg demo`), KS ("1 3 8" at λ = LAMBDA_AT_K), LAMBDAS ("0.01 0.1 1" at k = K_AT_LAMBDA),
+# MEMBERSHIP (view: the paper's per-view groups; persistent: `[reg] membership`, run names
+# get a `_persistent` suffix; several invocations into one OUT_DIR share the baseline).
 # Needs jq for the table. Runs that already finished are reused, so it can be resumed.
 set -euo pipefail
 
@@ -28,6 +30,12 @@ KS=${KS-"1 3 8"}
 LAMBDA_AT_K=${LAMBDA_AT_K:-0.1}
 LAMBDAS=${LAMBDAS-"0.01 0.1 1"}
 K_AT_LAMBDA=${K_AT_LAMBDA:-3}
+MEMBERSHIP=${MEMBERSHIP:-view}
+case $MEMBERSHIP in
+  view) SUFFIX="" ;;
+  persistent) SUFFIX="_persistent" ;;
+  *) echo "MEMBERSHIP must be view or persistent, got $MEMBERSHIP" >&2; exit 1 ;;
+esac
 DICT="white SUV,yellow sedan,green SUV"
 
 [ -x "$BIN" ] || { echo "no executable at $BIN (cargo build --release, or set BIN)" >&2; exit 1; }
@@ -49,14 +57,15 @@ run_config() { # name k lambda
   local dir="$OUT/$1"
   mkdir -p "$dir"
   [ -e "$dir/baseline" ] || ln -s "$(realpath "$BASE")" "$dir/baseline"
-  printf '[init]\nrandom_points = %s\n[reg]\nk = %s\nlambda = %s\n' "$POINTS" "$2" "$3" >"$dir/config.toml"
+  printf '[init]\nrandom_points = %s\n[reg]\nk = %s\nlambda = %s\nmembership = "%s"\n' \
+    "$POINTS" "$2" "$3" "$MEMBERSHIP" >"$dir/config.toml"
   [ -f "$dir/results.json" ] ||
     "$BIN" compare "$SCENE" --out "$dir" --iters "$ITERS" --seed "$SEED" --config "$dir/config.toml"
 }
 
 CONFIGS=()
-for k in $KS; do CONFIGS+=("k${k}_l${LAMBDA_AT_K} $k $LAMBDA_AT_K"); done
-for l in $LAMBDAS; do CONFIGS+=("k${K_AT_LAMBDA}_l${l} $K_AT_LAMBDA $l"); done
+for k in $KS; do CONFIGS+=("k${k}_l${LAMBDA_AT_K}$SUFFIX $k $LAMBDA_AT_K"); done
+for l in $LAMBDAS; do CONFIGS+=("k${K_AT_LAMBDA}_l${l}$SUFFIX $K_AT_LAMBDA $l"); done
 declare -A SEEN
 for c in "${CONFIGS[@]}"; do
   name=${c%% *}

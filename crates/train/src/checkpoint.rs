@@ -10,7 +10,7 @@ use crate::error::{Result, TrainError};
 use crate::field::DeformField;
 use crate::io::{atomic_write, create_dir_all};
 use crate::model::{GaussianModel, ROWS};
-use crate::state::{DensifyStats, GaussianState};
+use crate::state::{AuxRows, DensifyStats, GaussianState};
 use crate::trainer::Trainer;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -58,6 +58,9 @@ fn state_bytes(tr: &Trainer) -> Result<Vec<u8>> {
     f("stats.grad_accum".into(), vec![n], &st.stats.grad_accum);
     f("stats.denom".into(), vec![n], &st.stats.denom);
     f("stats.max_radii".into(), vec![n], &st.stats.max_radii);
+    for a in &st.aux {
+        f(format!("aux.{}", a.name), vec![n, a.cols], &a.data);
+    }
     let order: Vec<u8> = tr.order.iter().flat_map(|x| x.to_le_bytes()).collect();
     tensors.push((
         "epoch.order".into(),
@@ -73,6 +76,9 @@ fn state_bytes(tr: &Trainer) -> Result<Vec<u8>> {
     ));
     let mut meta = HashMap::new();
     meta.insert("format".to_string(), FORMAT.to_string());
+    let aux: Vec<&str> = st.aux.iter().map(|a| a.name.as_str()).collect();
+    meta.insert("aux".to_string(), aux.join(","));
+    meta.insert("train_seconds".to_string(), tr.train_seconds.to_string());
     meta.insert("iteration".to_string(), tr.iteration.to_string());
     meta.insert("sh_degree".to_string(), st.model.sh_degree.to_string());
     meta.insert("cursor".to_string(), tr.cursor.to_string());
@@ -180,6 +186,14 @@ impl StateFile<'_> {
             .map_err(|_| self.err(format!("metadata `{key}` = `{v}` is not valid")))
     }
 
+    /// Like [`StateFile::meta`] for keys that older checkpoints lack: `default` when absent.
+    fn meta_or<T: std::str::FromStr>(&self, key: &str, default: T) -> Result<T> {
+        match self.meta.contains_key(key) {
+            true => self.meta(key),
+            false => Ok(default),
+        }
+    }
+
     fn bytes(&self, name: &str, dtype: Dtype, len: usize) -> Result<Vec<u8>> {
         let t = self
             .st
@@ -210,6 +224,35 @@ impl StateFile<'_> {
         }
         Ok(v)
     }
+}
+
+/// The hook rows listed in metadata `aux` (absent in older checkpoints: none).
+fn read_aux(sf: &StateFile<'_>, n: usize) -> Result<Vec<AuxRows>> {
+    let names: String = sf.meta_or("aux", String::new())?;
+    let mut out = Vec::new();
+    for name in names.split(',').filter(|s| !s.is_empty()) {
+        let key = format!("aux.{name}");
+        let shape = sf
+            .st
+            .tensor(&key)
+            .map_err(|_| sf.err(format!("tensor `{key}` missing")))?
+            .shape()
+            .to_vec();
+        let cols = match shape[..] {
+            [rows, cols] if rows == n && cols > 0 => cols,
+            _ => {
+                return Err(sf.err(format!(
+                    "tensor `{key}` has shape {shape:?}, expected [{n}, cols]"
+                )))
+            }
+        };
+        out.push(AuxRows {
+            name: name.to_string(),
+            cols,
+            data: sf.f32s(&key, n * cols)?,
+        });
+    }
+    Ok(out)
 }
 
 fn read_config(dir: &Path) -> Result<TrainConfig> {
@@ -290,7 +333,13 @@ pub fn load_trainer(dir: &Path, dataset: scene::Dataset) -> Result<Trainer> {
         denom: sf.f32s("stats.denom", n)?,
         max_radii: sf.f32s("stats.max_radii", n)?,
     };
+    state.aux = read_aux(&sf, n)?;
     tr.state = state;
+    // Checkpoints from before this key existed resume with the clock at zero.
+    tr.train_seconds = sf.meta_or("train_seconds", 0.0f64)?;
+    if !(tr.train_seconds.is_finite() && tr.train_seconds >= 0.0) {
+        return Err(sf.err("metadata `train_seconds` must be finite and ≥ 0"));
+    }
     let len = sf
         .st
         .tensor("epoch.order")

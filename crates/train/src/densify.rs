@@ -82,9 +82,13 @@ pub fn densify_and_prune(
         .filter(|&i| hot(i) && max_scale(&st.model.log_scales, i) > dense)
         .collect();
     let clones = st.model.gather(&clone_idx);
-    st.append(&clones);
+    st.append(&clones, &clone_idx);
     let children = split_children(st, &split_idx, cfg.split_children, rng);
-    st.append(&children);
+    let parents: Vec<usize> = split_idx
+        .iter()
+        .flat_map(|&i| std::iter::repeat_n(i, cfg.split_children))
+        .collect();
+    st.append(&children, &parents);
     let mut keep = vec![true; st.len()];
     for &i in &split_idx {
         keep[i] = false;
@@ -196,6 +200,11 @@ mod tests {
     fn densify_keeps_parameters_and_moments_aligned() {
         let n = 10;
         let mut st = tagged(n);
+        st.aux.push(crate::state::AuxRows {
+            name: "tag".into(),
+            cols: 2,
+            data: (0..n).flat_map(|i| [i as f32, -(i as f32)]).collect(),
+        });
         // Gaussians 0..4 hot (0, 2, 4 small → clone; 1, 3 large → split); 5 transparent.
         for i in 0..5 {
             st.stats.grad_accum[i] = 1.0;
@@ -233,6 +242,11 @@ mod tests {
         let child = st.len() - 1;
         assert!((st.model.log_scales[child * 3] - (-1.0 - 1.6f32.ln())).abs() < 1e-6);
         assert!(st.stats.denom.iter().all(|&d| d == 0.0));
+        // Hook rows: every row, new ones included, carries its parent's (the SH tag's) id.
+        for r in 0..st.len() {
+            let id = st.model.sh[r * SH_FLOATS];
+            assert_eq!(st.aux[0].data[r * 2..r * 2 + 2], [id, -id], "row {r}");
+        }
     }
 
     #[test]

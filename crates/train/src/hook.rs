@@ -3,6 +3,7 @@
 //! its `dL/dδ`, which joins the photometric gradient before the field's backward pass.
 
 use crate::field::DeformOutput;
+use crate::state::AuxStore;
 use scene::Frame;
 
 /// What a hook sees of one iteration.
@@ -22,6 +23,9 @@ pub struct HookContext<'a> {
     pub topk_weights: &'a [f32],
     /// This iteration's deformation (zero for Gaussians the field was not evaluated on).
     pub delta: &'a DeformOutput,
+    /// Ascending indices of the Gaussians the field was evaluated on (`[field]
+    /// visible_only`); the others have δ = 0 and no field gradient this iteration.
+    pub field_rows: &'a [u32],
 }
 
 pub type HookError = Box<dyn std::error::Error + Send + Sync>;
@@ -32,6 +36,13 @@ pub trait DeformHook {
     fn topk(&self, iteration: u32) -> usize;
 
     /// Adds `dL_extra/dδ` into `d_delta` (zeroed, sized like `ctx.delta`) and returns
-    /// `L_extra` (already weighted). Only used when `ctx.field_active`.
-    fn apply(&mut self, ctx: &HookContext, d_delta: &mut DeformOutput) -> Result<f32, HookError>;
+    /// `L_extra` (already weighted). Only used when `ctx.field_active`. `rows` holds the
+    /// per-Gaussian state the hook keeps across iterations (densified and checkpointed with
+    /// the Gaussians).
+    fn apply(
+        &mut self,
+        ctx: &HookContext,
+        rows: &mut AuxStore,
+        d_delta: &mut DeformOutput,
+    ) -> Result<f32, HookError>;
 }

@@ -1,6 +1,6 @@
 //! Gaussians with everything that must stay row-aligned with them: Adam moments per
-//! parameter group and the densification statistics. Every row operation goes through
-//! here so no buffer can fall out of step.
+//! parameter group, the densification statistics and the rows a training hook keeps per
+//! Gaussian. Every row operation goes through here so no buffer can fall out of step.
 
 use crate::adam::Adam;
 use crate::model::{GaussianModel, ROWS};
@@ -45,12 +45,62 @@ impl DensifyStats {
     }
 }
 
+/// Per-Gaussian rows that a [`crate::hook::DeformHook`] keeps across iterations (the
+/// regularizer's persistent object membership): `cols` values per Gaussian, kept aligned
+/// through densification (a clone or split child inherits its parent's row, pruned rows
+/// go) and saved in checkpoints, so a resumed run continues with the same values.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AuxRows {
+    pub name: String,
+    pub cols: usize,
+    pub data: Vec<f32>,
+}
+
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct GaussianState {
     pub model: GaussianModel,
     /// Adam per group, in [`ROWS`] order (means, quats, log_scales, opacity, sh).
     pub adam: [Adam; 5],
     pub stats: DensifyStats,
+    /// Hook-owned rows, by name (usually none).
+    pub aux: Vec<AuxRows>,
+}
+
+/// The hook rows of a state, handed to [`crate::hook::DeformHook::apply`].
+#[derive(Debug)]
+pub struct AuxStore<'a> {
+    rows: &'a mut Vec<AuxRows>,
+    n: usize,
+}
+
+impl<'a> AuxStore<'a> {
+    pub fn new(rows: &'a mut Vec<AuxRows>, n: usize) -> Self {
+        Self { rows, n }
+    }
+
+    /// The rows called `name` (`n·cols` values), created as zeros on first use. Errors when
+    /// rows of that name exist with another width (a checkpoint from another setup).
+    pub fn get_or_zeros(&mut self, name: &str, cols: usize) -> Result<&mut [f32], String> {
+        let i = match self.rows.iter().position(|r| r.name == name) {
+            Some(i) => i,
+            None => {
+                self.rows.push(AuxRows {
+                    name: name.to_string(),
+                    cols,
+                    data: vec![0.0; self.n * cols],
+                });
+                self.rows.len() - 1
+            }
+        };
+        let r = &mut self.rows[i];
+        if r.cols != cols || r.data.len() != self.n * cols {
+            return Err(format!(
+                "per-Gaussian rows `{name}` hold {} values per Gaussian, expected {cols}",
+                r.cols
+            ));
+        }
+        Ok(&mut r.data)
+    }
 }
 
 impl GaussianState {
@@ -61,6 +111,7 @@ impl GaussianState {
             model,
             adam,
             stats: DensifyStats::zeros(n),
+            aux: Vec::new(),
         }
     }
 
@@ -82,11 +133,23 @@ impl GaussianState {
         for s in self.stats.arrays_mut() {
             crate::model::retain_rows(s, 1, keep);
         }
+        for a in &mut self.aux {
+            crate::model::retain_rows(&mut a.data, a.cols, keep);
+        }
     }
 
-    /// Appends new Gaussians with zero moments and zero statistics.
-    pub fn append(&mut self, new: &GaussianModel) {
+    /// Appends new Gaussians with zero moments and zero statistics; `parents[j]` is the row
+    /// that new Gaussian `j` was cloned or split from, whose hook rows it inherits.
+    pub fn append(&mut self, new: &GaussianModel, parents: &[usize]) {
         let k = new.len();
+        assert_eq!(parents.len(), k, "one parent per new Gaussian");
+        for a in &mut self.aux {
+            let c = a.cols;
+            a.data.reserve(k * c);
+            for &p in parents {
+                a.data.extend_from_within(p * c..(p + 1) * c);
+            }
+        }
         self.model.append(new);
         for (a, r) in self.adam.iter_mut().zip(ROWS) {
             a.append_zeros(k * r);
@@ -117,6 +180,7 @@ impl GaussianState {
         ]
         .iter()
         .all(|s| s.len() == n);
-        model_ok && adam_ok && stats_ok
+        let aux_ok = self.aux.iter().all(|a| a.data.len() == n * a.cols);
+        model_ok && adam_ok && stats_ok && aux_ok
     }
 }

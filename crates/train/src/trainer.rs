@@ -47,6 +47,9 @@ pub struct Trainer {
     pub(crate) cursor: usize,
     pub extent: f32,
     pub timings: StepTimings,
+    /// Wall-clock seconds spent training so far, over all resumed segments (the driver
+    /// updates it; checkpoints keep it).
+    pub train_seconds: f64,
     ws: Workspace,
 }
 
@@ -119,6 +122,7 @@ impl Trainer {
             cursor: 0,
             extent,
             timings: StepTimings::default(),
+            train_seconds: 0.0,
             ws: Workspace::default(),
         }
     }
@@ -279,6 +283,7 @@ impl Trainer {
         ws.size = (out.width, out.height);
         tm.record(Phase::Loss, t0);
         ws.extra.reset(model.len());
+        let mut aux = crate::state::AuxStore::new(&mut self.state.aux, model.len());
         let mut extra_loss = 0.0;
         if let Some(h) = hook.as_mut() {
             let t0 = std::time::Instant::now();
@@ -293,9 +298,10 @@ impl Trainer {
                 topk_ids: out.topk_ids,
                 topk_weights: out.topk_weights,
                 delta: &ws.delta,
+                field_rows: &ws.rows,
             };
             extra_loss = h
-                .apply(&ctx, &mut ws.extra)
+                .apply(&ctx, &mut aux, &mut ws.extra)
                 .map_err(|e| TrainError::Hook(e.to_string()))?;
             tm.record(Phase::Hook, t0);
         }

@@ -103,3 +103,37 @@ fn bad_config_files_name_the_problem() {
         .to_string();
     assert!(e.contains("absent.toml"), "{e}");
 }
+
+/// Hook rows round-trip; a checkpoint that lists rows it does not hold names them.
+#[test]
+fn hook_rows_roundtrip_and_missing_rows_are_named() {
+    let mut tr = Trainer::new(common::small_config(50), common::dataset(), 1).unwrap();
+    let n = tr.state.len();
+    tr.state.aux.push(train::state::AuxRows {
+        name: "reg.test".into(),
+        cols: 2,
+        data: (0..2 * n).map(|i| i as f32 * 0.5).collect(),
+    });
+    let run = tempfile::tempdir().unwrap();
+    let dir = checkpoint::save(&tr, run.path()).unwrap();
+    let back = checkpoint::load_trainer(&dir, common::dataset()).unwrap();
+    assert_eq!(back.state.aux, tr.state.aux);
+
+    // Rewrite the state file with metadata that lists a second, absent set of rows.
+    let p = dir.join(checkpoint::STATE_NAME);
+    let bytes = std::fs::read(&p).unwrap();
+    let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).unwrap();
+    let mut meta = meta.metadata().clone().unwrap();
+    meta.insert("aux".into(), "reg.test,reg.gone".into());
+    let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+    let views: Vec<(String, safetensors::tensor::TensorView)> = st.tensors();
+    std::fs::write(&p, safetensors::serialize(views, Some(meta)).unwrap()).unwrap();
+    let e = checkpoint::load_trainer(&dir, common::dataset())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("aux.reg.gone") && e.contains("state.safetensors"),
+        "{e}"
+    );
+}

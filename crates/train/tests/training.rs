@@ -80,6 +80,11 @@ fn resume_and_compare(cfg: train::TrainConfig, a: &Trainer) {
     for _ in 0..40 {
         c.step().unwrap();
     }
+    assert_bit_equal(a, &c);
+}
+
+/// Every parameter, moment, hook row and the field, bit for bit.
+fn assert_bit_equal(a: &Trainer, c: &Trainer) {
     assert_eq!(a.state.len(), c.state.len(), "Gaussian counts differ");
     let named = |t: &Trainer| -> Vec<(String, Vec<f32>)> {
         let mut v: Vec<(String, Vec<f32>)> = ["means", "quats", "log_scales", "opacity", "sh"]
@@ -94,9 +99,14 @@ fn resume_and_compare(cfg: train::TrainConfig, a: &Trainer) {
         v.push(("stats.grad_accum".into(), t.state.stats.grad_accum.clone()));
         v.push(("field".into(), t.field.mlp.params.clone()));
         v.push(("field.adam.m".into(), t.field_adam.m.clone()));
+        for r in &t.state.aux {
+            v.push((format!("aux.{}", r.name), r.data.clone()));
+        }
         v
     };
-    for ((name, x), (_, y)) in named(a).into_iter().zip(named(&c)) {
+    let (x, y) = (named(a), named(c));
+    assert_eq!(x.len(), y.len(), "hook rows differ");
+    for ((name, x), (_, y)) in x.into_iter().zip(y) {
         let first = x
             .iter()
             .zip(&y)
@@ -105,6 +115,65 @@ fn resume_and_compare(cfg: train::TrainConfig, a: &Trainer) {
     }
     assert_eq!(a.state.model.sh_degree, c.state.model.sh_degree);
     assert_eq!(a.field_adam.step, c.field_adam.step);
+}
+
+/// The tiny scene with its ground-truth instance masks as object-ID maps (what
+/// `semdynreg segment --masks gt --labels gt` writes: the same IDs, 255 = background).
+fn scene_with_id_maps() -> scene::Dataset {
+    let root = common::tiny_scene();
+    let ds = common::dataset();
+    for f in &ds.train {
+        let dst = ds.semantics_path(f);
+        std::fs::create_dir_all(dst.parent().unwrap()).unwrap();
+        std::fs::copy(scene::mask_path(&root, &f.file_path), dst).unwrap();
+    }
+    ds
+}
+
+/// Persistent membership keeps per-Gaussian votes in the trainer's hook rows: they are
+/// densified with the Gaussians, saved in checkpoints, and a run stopped and resumed (with a
+/// fresh hook) ends bit-identical to an uninterrupted one.
+#[test]
+fn persistent_membership_votes_survive_densify_and_resume() {
+    use train::regularizer::{Membership, SemanticHook, VOTES_NAME};
+    let mut cfg = common::small_config(80);
+    cfg.reg.enabled = true;
+    cfg.reg.membership = Membership::Persistent;
+    (cfg.reg.start_iter, cfg.reg.end_iter) = (25, 80);
+    (cfg.reg.lambda, cfg.reg.tau_d, cfg.reg.persist_min_weight) = (1.0, 0.0, 0.05);
+    let ds = scene_with_id_maps();
+    let run_steps = |t: &mut Trainer, n: usize, max_persistent: &mut u32| {
+        let mut hook = SemanticHook::load(t.cfg.reg.clone(), &t.dataset).unwrap();
+        for _ in 0..n {
+            t.step_with(Some(&mut hook)).unwrap();
+            let p = hook.stats().iter().map(|s| s.persistent).max().unwrap_or(0);
+            *max_persistent = (*max_persistent).max(p);
+        }
+    };
+    let mut persistent = 0;
+    let mut a = Trainer::new(cfg.clone(), ds.clone(), 5).unwrap();
+    run_steps(&mut a, 80, &mut persistent);
+    let votes = &a.state.aux.iter().find(|r| r.name == VOTES_NAME).unwrap();
+    assert!(votes.data.iter().any(|&v| v > 0.0), "no votes recorded");
+    assert!(
+        persistent > 0,
+        "no Gaussian ever became a persistent member"
+    );
+    assert!(a.state.is_aligned());
+
+    let mut b = Trainer::new(cfg, ds.clone(), 5).unwrap();
+    run_steps(&mut b, 50, &mut 0);
+    b.train_seconds = 12.5;
+    let run = tempfile::tempdir().unwrap();
+    let dir = checkpoint::save(&b, run.path()).unwrap();
+    drop(b);
+    let mut c = checkpoint::load_trainer(&dir, ds).unwrap();
+    assert_eq!(
+        c.train_seconds, 12.5,
+        "training time is carried across a resume"
+    );
+    run_steps(&mut c, 30, &mut 0);
+    assert_bit_equal(&a, &c);
 }
 
 /// A point cloud with colours (3DGS `fetchPly`) starts each Gaussian at its point's colour:

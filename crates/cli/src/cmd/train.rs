@@ -145,6 +145,8 @@ pub fn run(a: Args) -> Result<()> {
     let pb = progress_bar(&tr);
     let start = Instant::now();
     let first = tr.iteration;
+    // Training time over all segments of a resumed run (checkpoints carry it).
+    let before = tr.train_seconds;
     let mut hook = if tr.cfg.reg.enabled {
         Some(SemanticHook::load(tr.cfg.reg.clone(), &tr.dataset)?)
     } else {
@@ -162,7 +164,7 @@ pub fn run(a: Args) -> Result<()> {
         if l.log_interval > 0 && it % l.log_interval == 0 {
             let secs = start.elapsed().as_secs_f64();
             let mut line = serde_json::json!({"iteration": it, "loss": st.loss.total, "l1": st.loss.l1, "ssim": st.loss.ssim,
-                "psnr": st.psnr, "num_gaussians": st.num_gaussians, "elapsed_s": secs,
+                "psnr": st.psnr, "num_gaussians": st.num_gaussians, "elapsed_s": before + secs,
                 "it_per_s": (it - first) as f64 / secs.max(1e-9)});
             if let Some(h) = hook.as_ref().filter(|h| h.active_at(it)) {
                 // Per-object group sizes, deviations and skips (issue 6, item 1).
@@ -183,6 +185,7 @@ pub fn run(a: Args) -> Result<()> {
             )?;
         }
         let interrupted = stop.load(Ordering::SeqCst);
+        tr.train_seconds = before + start.elapsed().as_secs_f64();
         if (l.checkpoint_interval > 0 && it % l.checkpoint_interval == 0) || interrupted {
             let dir = checkpoint::save(&tr, &a.out)?;
             tracing::info!("checkpoint {}", dir.display());
@@ -193,12 +196,14 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     pb.finish();
+    tr.train_seconds = before + start.elapsed().as_secs_f64();
     checkpoint::save(&tr, &a.out)?;
     write_timings(&tr, &a.out, start.elapsed().as_secs_f64(), first)?;
     Ok(())
 }
 
-/// `RUN/timings.json`: wall time and the per-phase breakdown (ms per iteration).
+/// `RUN/timings.json`: wall time and the per-phase breakdown (ms per iteration) of this
+/// segment, and `total_train_s` over every segment of a resumed run.
 fn write_timings(tr: &Trainer, run: &Path, wall: f64, first: u32) -> Result<()> {
     let phases: serde_json::Map<String, serde_json::Value> = tr
         .timings
@@ -207,6 +212,7 @@ fn write_timings(tr: &Trainer, run: &Path, wall: f64, first: u32) -> Result<()> 
         .map(|(k, v)| (k.to_string(), v.into()))
         .collect();
     let v = serde_json::json!({"wall_s": wall, "iterations": tr.iteration - first,
+        "total_train_s": tr.train_seconds, "total_iterations": tr.iteration,
         "num_gaussians": tr.state.len(), "ms_per_iteration": phases});
     scene::io::write_json(&run.join("timings.json"), &v).context("writing timings.json")
 }

@@ -36,6 +36,28 @@ pub struct RegConfig {
     pub start_iter: u64,
     /// Last iteration (inclusive) at which the loss is applied, for a 40k schedule.
     pub end_iter: u64,
+    /// How `G_o` is formed: from this view's top-k alone (the paper), or also from the
+    /// Gaussians that belonged to `o` in earlier views ([`Membership::Persistent`]).
+    pub membership: Membership,
+    /// Persistent membership: a Gaussian belongs to object `o` when `o` holds at least this
+    /// share of its accumulated top-k weight (over all objects and the background).
+    pub persist_share: f32,
+    /// Persistent membership: and when that weight is at least this much (Σ of `T·α`
+    /// over the pixels where it was in the top-k of `o`).
+    pub persist_min_weight: f32,
+}
+
+/// Where the members of an object's group come from (DESIGN.md, "SemDynReg" item 5).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Membership {
+    /// Paper Sec. 3.3: `G_o` = the top-k of this view's pixels with ID `o`.
+    #[default]
+    View,
+    /// Our extension: this view's group ∪ every Gaussian (evaluated by the field this
+    /// iteration) whose top-k weight, accumulated over all earlier active iterations, is
+    /// mostly on `o`. Pulls along Gaussians that left the object's mask (trailing ghosts).
+    Persistent,
 }
 
 impl Default for RegConfig {
@@ -52,6 +74,9 @@ impl Default for RegConfig {
             tau_d: 0.01,
             start_iter: 10_000,
             end_iter: REFERENCE_ITERS,
+            membership: Membership::View,
+            persist_share: 0.5,
+            persist_min_weight: 1.0,
         }
     }
 }
@@ -71,11 +96,18 @@ impl RegConfig {
             ("lambda_r", self.lambda_r),
             ("lambda_s", self.lambda_s),
             ("tau_d", self.tau_d),
+            ("persist_min_weight", self.persist_min_weight),
         ];
         for (field, v) in weights {
             if !v.is_finite() || v < 0.0 {
                 return Err(invalid(field, format!("must be finite and ≥ 0, got {v}")));
             }
+        }
+        if !(self.persist_share > 0.0 && self.persist_share <= 1.0) {
+            return Err(invalid(
+                "persist_share",
+                format!("must be in (0, 1], got {}", self.persist_share),
+            ));
         }
         if self.start_iter > self.end_iter {
             return Err(invalid(
@@ -164,5 +196,17 @@ mod tests {
         assert_eq!(toml::from_str::<RegConfig>(&text).unwrap(), c);
         let err = toml::from_str::<RegConfig>("lamda = 1").unwrap_err();
         assert!(err.to_string().contains("lamda"), "{err}");
+        let c: RegConfig = toml::from_str("membership = \"persistent\"").unwrap();
+        assert_eq!(c.membership, Membership::Persistent);
+        assert!(toml::from_str::<RegConfig>("membership = \"always\"").is_err());
+        let bad = RegConfig {
+            persist_share: 0.0,
+            ..RegConfig::default()
+        };
+        assert!(bad
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("persist_share"));
     }
 }

@@ -10,6 +10,8 @@ pub enum RegError {
     TopKLength { len: usize, k: usize },
     #[error("top-k stride k must be ≥ 1 (got 0)")]
     ZeroTopK,
+    #[error("top-k weights have {len} entries, the top-k ids {ids}")]
+    TopKWeights { len: usize, ids: usize },
     #[error("object-ID map has {len} pixels but the top-k render has {pixels} (size mismatch?)")]
     IdMapLength { len: usize, pixels: usize },
     #[error("top-k entry at pixel {pixel} names Gaussian {id}, but only {n} Gaussians exist")]

@@ -75,8 +75,22 @@ impl ObjectGroups {
         id_map: &[u8],
         n_gaussians: usize,
     ) -> Result<(), RegError> {
+        self.build_with(topk, use_k, id_map, n_gaussians, &|_| &[])
+    }
+
+    /// [`ObjectGroups::build`], with `extra(o)` (ascending indices) joined to the group of
+    /// every object `o` present in the view: the persistent members of
+    /// [`super::MembershipVotes`].
+    pub fn build_with<'e>(
+        &mut self,
+        topk: TopKView<'_>,
+        use_k: usize,
+        id_map: &[u8],
+        n_gaussians: usize,
+        extra: &dyn Fn(u8) -> &'e [u32],
+    ) -> Result<(), RegError> {
         self.clear(n_gaussians);
-        let result = self.build_inner(topk, use_k, id_map);
+        let result = self.build_inner(topk, use_k, id_map, extra);
         if result.is_err() {
             self.clear(n_gaussians);
         }
@@ -92,11 +106,12 @@ impl ObjectGroups {
         self.members.clear();
     }
 
-    fn build_inner(
+    fn build_inner<'e>(
         &mut self,
         topk: TopKView<'_>,
         use_k: usize,
         id_map: &[u8],
+        extra: &dyn Fn(u8) -> &'e [u32],
     ) -> Result<(), RegError> {
         check_shapes(topk, id_map)?;
         let n = self.n_gaussians;
@@ -128,6 +143,13 @@ impl ObjectGroups {
                     }
                     self.bits[id as usize >> 6] |= 1u64 << (id & 63);
                 }
+            }
+            for &id in extra(object as u8) {
+                if id as usize >= n {
+                    self.bits.fill(0);
+                    return Err(RegError::GaussianIndexOutOfRange { pixel: 0, id, n });
+                }
+                self.bits[id as usize >> 6] |= 1u64 << (id & 63);
             }
             self.extract_members();
             self.objects.push(object as u8);
@@ -209,7 +231,7 @@ impl ObjectGroups {
     }
 }
 
-fn check_shapes(topk: TopKView<'_>, id_map: &[u8]) -> Result<(), RegError> {
+pub(super) fn check_shapes(topk: TopKView<'_>, id_map: &[u8]) -> Result<(), RegError> {
     if topk.stride == 0 {
         return Err(RegError::ZeroTopK);
     }
@@ -251,6 +273,46 @@ mod tests {
         // Gaussian 2 is in both groups; background pixel's Gaussian 9 is in none.
         assert_eq!(g.group(1).unwrap().members, &[2, 7]);
         assert!(g.group(255).is_none());
+    }
+
+    #[test]
+    fn extra_members_join_present_objects_only() {
+        // Object 0 on pixel 0 (Gaussian 5), object 1 nowhere in this view.
+        let ids = [5, NO_GAUSSIAN];
+        let mut g = ObjectGroups::new();
+        let extra = |o: u8| -> &'static [u32] {
+            match o {
+                0 => &[1, 5, 8],
+                1 => &[3],
+                _ => &[],
+            }
+        };
+        g.build_with(
+            TopKView {
+                ids: &ids,
+                stride: 1,
+            },
+            1,
+            &[0, 255],
+            10,
+            &extra,
+        )
+        .unwrap();
+        // Union as a set, ascending; object 1 has no pixels, so no group.
+        assert_eq!(g.group(0).unwrap().members, &[1, 5, 8]);
+        assert!(g.group(1).is_none());
+        let bad = |_: u8| -> &'static [u32] { &[10] };
+        let e = g.build_with(
+            TopKView {
+                ids: &ids,
+                stride: 1,
+            },
+            1,
+            &[0, 255],
+            10,
+            &bad,
+        );
+        assert!(e.is_err() && g.is_empty());
     }
 
     #[test]

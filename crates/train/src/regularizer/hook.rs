@@ -3,10 +3,14 @@
 //! for the per-pixel top-k, groups Gaussians by the training view's object-ID map (Sec. 3.3)
 //! and adds `λ·∇L_reg` to the field's `dL/dδ` (Sec. 3.4).
 
-use super::{DeformGradMut, DeformView, ObjectStats, RegConfig, RegLoss, Regularizer, TopKView};
+use super::{
+    DeformGradMut, DeformView, ObjectStats, Persist, RegConfig, RegLoss, Regularizer, TopKView,
+    VOTES_NAME,
+};
 use crate::error::{Result, TrainError};
 use crate::field::DeformOutput;
 use crate::hook::{DeformHook, HookContext, HookError};
+use crate::state::AuxStore;
 use scene::Dataset;
 
 /// The regularizer plus one object-ID map per training frame, at the training resolution.
@@ -21,7 +25,8 @@ impl SemanticHook {
     /// `semdynreg segment`); maps made at another resolution are resampled (nearest) to
     /// the frame's size, since `--downscale` may differ from the segmentation's.
     pub fn load(cfg: RegConfig, dataset: &Dataset) -> Result<Self> {
-        let reg = Regularizer::new(cfg).map_err(|e| TrainError::config("reg", e.to_string()))?;
+        let mut reg =
+            Regularizer::new(cfg).map_err(|e| TrainError::config("reg", e.to_string()))?;
         let mut id_maps = Vec::with_capacity(dataset.train.len());
         for frame in &dataset.train {
             let path = dataset.semantics_path(frame);
@@ -36,6 +41,7 @@ impl SemanticHook {
             let (w, h) = (frame.image.width, frame.image.height);
             id_maps.push(resample_nearest(&mask.data, mask.width, mask.height, w, h));
         }
+        reg.set_objects(id_maps.iter().map(Vec::as_slice));
         Ok(Self {
             reg,
             id_maps,
@@ -86,6 +92,7 @@ impl DeformHook for SemanticHook {
     fn apply(
         &mut self,
         ctx: &HookContext,
+        rows: &mut AuxStore,
         d_delta: &mut DeformOutput,
     ) -> std::result::Result<f32, HookError> {
         if ctx.topk == 0 || !self.active_at(ctx.iteration) {
@@ -106,7 +113,15 @@ impl DeformHook for SemanticHook {
             dr: &mut d_delta.dr,
             ds: &mut d_delta.ds,
         };
-        self.last = self.reg.apply(topk, id_map, deform, &mut grad)?;
+        let persist = match self.reg.votes_cols() {
+            Some(cols) => Some(Persist {
+                weights: ctx.topk_weights,
+                rows: ctx.field_rows,
+                votes: rows.get_or_zeros(VOTES_NAME, cols)?,
+            }),
+            None => None,
+        };
+        self.last = self.reg.apply(topk, id_map, deform, &mut grad, persist)?;
         Ok(self.last.weighted)
     }
 }

@@ -121,6 +121,7 @@ fn object_pass(
         dev_s: dev_s as f32,
         loss: loss as f32,
         skipped,
+        persistent: 0,
     }
 }
 

@@ -10,7 +10,9 @@
 //!    per-object [`ObjectStats`] for the log;
 //! 3. [`RegConfig`] holds every constant and the activation schedule; [`Regularizer`] bundles
 //!    config and reused buffers into one call per training step;
-//! 4. [`consistency`] measures how far vehicle Gaussians stray from the ground-truth rigid
+//! 4. [`membership`] (opt-in, our extension) keeps per-Gaussian object votes across views so
+//!    that `G_o` also holds the object's Gaussians that left its mask in this view;
+//! 5. [`consistency`] measures how far vehicle Gaussians stray from the ground-truth rigid
 //!    motion (the `compare` metric).
 
 pub mod config;
@@ -19,14 +21,16 @@ pub mod error;
 pub mod grouping;
 pub mod hook;
 pub mod loss;
+pub mod membership;
 pub mod stats;
 pub mod step;
 
-pub use config::{RegConfig, REFERENCE_ITERS};
+pub use config::{Membership, RegConfig, REFERENCE_ITERS};
 pub use consistency::{ConsistencyAccumulator, ConsistencyReport, ObjectTrack};
 pub use error::RegError;
 pub use grouping::{Group, ObjectGroups, TopKView, BACKGROUND_ID, NO_GAUSSIAN};
 pub use hook::SemanticHook;
 pub use loss::{evaluate, DeformGradMut, DeformView, RegLoss};
+pub use membership::{MembershipVotes, VOTES_NAME};
 pub use stats::ObjectStats;
-pub use step::Regularizer;
+pub use step::{Persist, Regularizer};

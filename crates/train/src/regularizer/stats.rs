@@ -23,4 +23,7 @@ pub struct ObjectStats {
     pub loss: f32,
     /// True when `‖δx̄_o‖ ≤ τ_d` (static) or the group is empty.
     pub skipped: bool,
+    /// With `membership = "persistent"`: the object's persistent members this iteration
+    /// (joined to the view's group, so `group_size` counts the union); 0 otherwise.
+    pub persistent: u32,
 }

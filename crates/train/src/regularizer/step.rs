@@ -11,10 +11,11 @@
 //! }
 //! ```
 
-use super::config::RegConfig;
+use super::config::{Membership, RegConfig};
 use super::error::RegError;
 use super::grouping::{ObjectGroups, TopKView};
 use super::loss::{evaluate, DeformGradMut, DeformView, RegLoss};
+use super::membership::MembershipVotes;
 use super::stats::ObjectStats;
 
 #[derive(Clone, Debug)]
@@ -22,6 +23,19 @@ pub struct Regularizer {
     cfg: RegConfig,
     groups: ObjectGroups,
     stats: Vec<ObjectStats>,
+    /// Present with `membership = "persistent"` once [`Regularizer::set_objects`] ran.
+    membership: Option<MembershipVotes>,
+}
+
+/// What persistent membership needs from the training step besides the top-k ids.
+#[derive(Debug)]
+pub struct Persist<'a> {
+    /// Top-k weights `T·α`, laid out like the ids.
+    pub weights: &'a [f32],
+    /// Ascending indices of the Gaussians the field evaluated (the others have δ = 0).
+    pub rows: &'a [u32],
+    /// The votes (`N × votes_cols()`), kept by the trainer across iterations.
+    pub votes: &'a mut [f32],
 }
 
 impl Regularizer {
@@ -32,7 +46,21 @@ impl Regularizer {
             cfg,
             groups: ObjectGroups::new(),
             stats: Vec::new(),
+            membership: None,
         })
+    }
+
+    /// Declares the object IDs of the training ID maps; with `membership = "persistent"` this
+    /// sets up one vote column per object (and one for the background).
+    pub fn set_objects<'a>(&mut self, id_maps: impl IntoIterator<Item = &'a [u8]>) {
+        if self.cfg.membership == Membership::Persistent {
+            self.membership = Some(MembershipVotes::new(id_maps));
+        }
+    }
+
+    /// Columns of the per-Gaussian votes persistent membership keeps (None: not persistent).
+    pub fn votes_cols(&self) -> Option<usize> {
+        self.membership.as_ref().map(MembershipVotes::cols)
     }
 
     pub fn config(&self) -> &RegConfig {
@@ -50,17 +78,36 @@ impl Regularizer {
     }
 
     /// Group the view's Gaussians by object, evaluate `λ·L_reg` and add its gradient into
-    /// `grad` (the trainer's dL/dδ, before the field backward).
+    /// `grad` (the trainer's dL/dδ, before the field backward). With persistent membership
+    /// and `persist` given, this view's top-k first votes, then the groups take in the
+    /// persistent members.
     pub fn apply(
         &mut self,
         topk: TopKView<'_>,
         id_map: &[u8],
         deform: DeformView<'_>,
         grad: &mut DeformGradMut<'_>,
+        persist: Option<Persist<'_>>,
     ) -> Result<RegLoss, RegError> {
         let n = deform.dx.len() / 3;
-        self.groups.build(topk, self.cfg.k, id_map, n)?;
+        let k = self.cfg.k;
+        match (&mut self.membership, persist) {
+            (Some(mv), Some(p)) => {
+                mv.record(topk, p.weights, k, id_map, p.votes)?;
+                let (share, min_w) = (self.cfg.persist_share, self.cfg.persist_min_weight);
+                mv.update_members(p.votes, p.rows, share, min_w);
+                let mv = &*mv;
+                self.groups
+                    .build_with(topk, k, id_map, n, &|o| mv.members_of(o))?;
+            }
+            _ => self.groups.build(topk, k, id_map, n)?,
+        }
         let loss = evaluate(&self.groups, deform, &self.cfg, Some(grad), &mut self.stats)?;
+        if let Some(mv) = &self.membership {
+            for s in &mut self.stats {
+                s.persistent = mv.members_of(s.object).len() as u32;
+            }
+        }
         tracing::debug!(
             l_reg = loss.l_reg,
             active = loss.active,
@@ -118,6 +165,7 @@ mod tests {
                 &[5, 5],
                 deform,
                 &mut grad,
+                None,
             )
             .unwrap();
         // G_5 = {0, 1}: mean δx 1, deviation 1; Gaussian 2 (rank 2) is not grouped.

@@ -79,6 +79,13 @@ fn compare_trains_both_runs_and_reports_every_key() {
         let per = per.as_object().unwrap();
         assert!(per.contains_key("white-suv"), "{run}: {per:?}");
         assert!(per.values().all(|v| v.as_f64().is_some_and(f64::is_finite)));
+        // Only the moving vehicle has a share of motion followed.
+        let follow = key(&results, &format!("{run}.deformation_follow_per_object"));
+        let follow = follow.as_object().unwrap();
+        assert_eq!(follow.keys().collect::<Vec<_>>(), ["white-suv"], "{run}");
+        assert!(follow["white-suv"]
+            .as_f64()
+            .is_some_and(|f| f.is_finite() && f <= 1.0));
     }
     // Only the SemDynReg run logs the regularizer, and only inside its window.
     let log = |run: &str| std::fs::read_to_string(out.join(run).join("metrics.jsonl")).unwrap();

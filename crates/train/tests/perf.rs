@@ -2,6 +2,10 @@
 //! `CARGO_TARGET_DIR=... cargo test --release -p train --test perf -- --ignored --nocapture`
 //! (the test profile has opt-level 3 too). Prints ms per phase for each field option
 //! (`PERF_ONLY_DEFAULT=1`: only the default field).
+//!
+//! The same breakdown on a trained model (the Gaussians a real run has, not the random init):
+//! `PERF_CHECKPOINT=RUN/checkpoints/iter_NNNNNNN PERF_SCENE=SCENE cargo test --release -p
+//! train --test perf checkpoint -- --ignored --nocapture`.
 
 use train::config::FieldConfig;
 use train::{TrainConfig, Trainer};
@@ -28,7 +32,12 @@ fn measure(name: &str, field: FieldConfig, dir: &std::path::Path, iters: u32) {
     };
     cfg.densify.from = 1_000_000; // measure at a fixed Gaussian count (100k random init)
     cfg.densify.until = 0;
-    let mut tr = Trainer::new(cfg, ds, 0).unwrap();
+    let tr = Trainer::new(cfg, ds, 0).unwrap();
+    time_steps(name, tr, iters);
+}
+
+/// Warm up 3 steps, then time `iters` and print ms per phase.
+fn time_steps(name: &str, mut tr: Trainer, iters: u32) {
     for _ in 0..3 {
         tr.step().unwrap();
     }
@@ -91,4 +100,24 @@ fn iteration_breakdown_480x360() {
         dir.path(),
         iters.min(2),
     );
+}
+
+/// Breakdown at a checkpoint's state, densification off (`PERF_CHECKPOINT`, `PERF_SCENE`).
+#[test]
+#[ignore]
+fn iteration_breakdown_checkpoint() {
+    let (Ok(ckpt), Ok(scene)) = (
+        std::env::var("PERF_CHECKPOINT"),
+        std::env::var("PERF_SCENE"),
+    ) else {
+        panic!("set PERF_CHECKPOINT (a checkpoint folder) and PERF_SCENE (its scene folder)");
+    };
+    let ds = scene::load_dataset(scene.as_ref(), &scene::LoadOptions::default()).unwrap();
+    let mut tr = train::checkpoint::load_trainer(ckpt.as_ref(), ds).unwrap();
+    tr.cfg.densify.until = 0;
+    let iters: u32 = std::env::var("PERF_ITERS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(5);
+    time_steps(&format!("checkpoint iteration {}", tr.iteration), tr, iters);
 }

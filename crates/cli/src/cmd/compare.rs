@@ -205,6 +205,11 @@ fn evaluate_and_report(args: &Args, runs: Runs) -> Result<()> {
                         .iter()
                         .map(|x| (object_name(&set, x.object), x.rms))
                         .collect();
+                    res.deformation_follow_per_object = r
+                        .per_object
+                        .iter()
+                        .filter_map(|x| Some((object_name(&set, x.object), x.follow()?)))
+                        .collect();
                 }
             }
         }

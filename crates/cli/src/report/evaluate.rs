@@ -144,6 +144,7 @@ pub fn evaluate_run(
         static_object_crops,
         deformation_consistency_rms: None,
         deformation_consistency_per_object: Default::default(),
+        deformation_follow_per_object: Default::default(),
         renders: renders.0.display().to_string(),
     };
     Ok(RunEval {

@@ -66,6 +66,11 @@ pub struct MethodResults {
     /// value is the one the regularizer is meant to lower. Empty when not computed.
     #[serde(default)]
     pub deformation_consistency_per_object: BTreeMap<String, f64>,
+    /// Per moving vehicle, `1 − rms / rms_if_still`: how much of the vehicle's true motion
+    /// its Gaussians follow (1 = rigidly with it; 0 = no better than not moving at all;
+    /// `train::regularizer::consistency`). Vehicles that do not move have no entry.
+    #[serde(default)]
+    pub deformation_follow_per_object: BTreeMap<String, f64>,
     /// Where the rendered frames came from.
     pub renders: String,
 }

@@ -59,7 +59,7 @@ pub fn crop_table(caption: String, base: &CropSeries, ours: &CropSeries) -> Pape
 }
 
 /// Full-frame scores and deformation consistency (all vehicles pooled, then the moving
-/// one alone), baseline vs ours.
+/// one alone, then the share of its motion its Gaussians follow), baseline vs ours.
 pub fn summary_table(r: &Results) -> PaperTable {
     let moving = &r.protocol.moving_object;
     let cells = |m: &super::results::MethodResults| {
@@ -70,9 +70,11 @@ pub fn summary_table(r: &Results) -> PaperTable {
             fmt(s.lpips),
             fmt(m.deformation_consistency_rms),
             fmt(m.deformation_consistency_per_object.get(moving).copied()),
+            fmt(m.deformation_follow_per_object.get(moving).copied()),
         ]
     };
     let moving_header = format!("consistency RMS, {moving} ↓");
+    let follow_header = format!("motion followed, {moving} ↑");
     PaperTable {
         caption: "Full-frame test metrics and deformation consistency".into(),
         header: vec![
@@ -82,6 +84,7 @@ pub fn summary_table(r: &Results) -> PaperTable {
             "LPIPS ↓".into(),
             "consistency RMS ↓".into(),
             moving_header,
+            follow_header,
         ],
         blocks: vec![Block {
             title: "",

@@ -18,6 +18,12 @@
 //! deformed anchor, `e(t_ref) = 0` by construction and `e(t)` measures only motion that is not
 //! the vehicle's rigid motion (for a still vehicle, `M_o = I`: any drift). Callers may pass
 //! canonical positions as anchors when their canonical space is the `t_ref` frame.
+//!
+//! Scale for reading it. Per object we also report `rms_if_still`: the same RMS for Gaussians
+//! that stayed at their anchors (`‖a_i − M_o(t)·a_i‖`, i.e. how far the vehicle moved them
+//! away from where they were), and `follow = 1 − rms / rms_if_still`: 1 when the Gaussians
+//! ride rigidly with the vehicle, 0 when they might as well not have moved (undefined for
+//! a vehicle that does not move).
 
 use std::collections::BTreeMap;
 
@@ -111,18 +117,28 @@ pub struct ObjectTrack<'a> {
     pub pose_t: &'a [[f32; 4]; 4],
 }
 
-/// `Σ_{i∈members} ‖x_i(t) − M(t)·a_i‖²` and the member count (see module docs).
+/// Sums over one track's members at one time (see module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SquaredErrors {
+    /// `Σ ‖x_i(t) − M(t)·a_i‖²`.
+    pub sum: f64,
+    /// `Σ ‖a_i − M(t)·a_i‖²`: the same had the Gaussians stayed at their anchors.
+    pub sum_if_still: f64,
+    pub count: usize,
+}
+
+/// The squared errors of one track's members at one time (see module docs).
 pub fn squared_errors(
     track: &ObjectTrack<'_>,
     anchor: &[f32],
     deformed: &[f32],
-) -> Result<(f64, usize), RegError> {
+) -> Result<SquaredErrors, RegError> {
     let motion = RigidPose::from_matrix(track.object, track.pose_t)?
         .after_inverse_of(&RigidPose::from_matrix(track.object, track.pose_ref)?);
     let n = anchor.len() / 3;
     check_positions("anchor", anchor.len(), n)?;
     check_positions("deformed", deformed.len(), n)?;
-    let mut sum = 0.0;
+    let (mut sum, mut sum_if_still) = (0.0, 0.0);
     for &i in track.members {
         let i = i as usize;
         if i >= n {
@@ -134,11 +150,15 @@ pub fn squared_errors(
         }
         let a = [0, 1, 2].map(|c| f64::from(anchor[i * 3 + c]));
         let want = motion.apply(a);
-        sum += (0..3)
-            .map(|c| (f64::from(deformed[i * 3 + c]) - want[c]).powi(2))
-            .sum::<f64>();
+        let sq = |x: [f64; 3]| (0..3).map(|c| (x[c] - want[c]).powi(2)).sum::<f64>();
+        sum += sq([0, 1, 2].map(|c| f64::from(deformed[i * 3 + c])));
+        sum_if_still += sq(a);
     }
-    Ok((sum, track.members.len()))
+    Ok(SquaredErrors {
+        sum,
+        sum_if_still,
+        count: track.members.len(),
+    })
 }
 
 fn check_positions(name: &'static str, len: usize, n: usize) -> Result<(), RegError> {
@@ -165,6 +185,16 @@ pub struct TimeRms {
 pub struct ObjectRms {
     pub object: u8,
     pub rms: f64,
+    /// The same for Gaussians that stayed at their anchors (see module docs).
+    pub rms_if_still: f64,
+}
+
+impl ObjectRms {
+    /// `1 − rms / rms_if_still`: 1 = rides with the vehicle, 0 = as if it had not moved;
+    /// `None` for a vehicle that does not move (its Gaussians move less than 1e-6 units).
+    pub fn follow(&self) -> Option<f64> {
+        (self.rms_if_still > 1e-6).then(|| 1.0 - self.rms / self.rms_if_still)
+    }
 }
 
 /// The metric for a run (`deformation_consistency_rms` = `rms`).
@@ -180,7 +210,8 @@ pub struct ConsistencyReport {
 #[derive(Clone, Debug, Default)]
 pub struct ConsistencyAccumulator {
     per_time: Vec<TimeRms>,
-    per_object: BTreeMap<u8, Vec<f64>>,
+    /// Per object: (RMS, RMS if still) at each time.
+    per_object: BTreeMap<u8, Vec<(f64, f64)>>,
 }
 
 impl ConsistencyAccumulator {
@@ -199,13 +230,14 @@ impl ConsistencyAccumulator {
     ) -> Result<(), RegError> {
         let (mut sum, mut count) = (0.0, 0usize);
         for track in tracks {
-            let (s, c) = squared_errors(track, anchor, deformed)?;
-            if c > 0 {
-                let rms = (s / c as f64).sqrt();
-                self.per_object.entry(track.object).or_default().push(rms);
+            let e = squared_errors(track, anchor, deformed)?;
+            if e.count > 0 {
+                let rms = |s: f64| (s / e.count as f64).sqrt();
+                let v = (rms(e.sum), rms(e.sum_if_still));
+                self.per_object.entry(track.object).or_default().push(v);
             }
-            sum += s;
-            count += c;
+            sum += e.sum;
+            count += e.count;
         }
         if count > 0 {
             let rms = (sum / count as f64).sqrt();
@@ -232,7 +264,8 @@ impl ConsistencyAccumulator {
             .iter()
             .map(|(&object, v)| ObjectRms {
                 object,
-                rms: mean(&mut v.iter().copied(), v.len()),
+                rms: mean(&mut v.iter().map(|p| p.0), v.len()),
+                rms_if_still: mean(&mut v.iter().map(|p| p.1), v.len()),
             })
             .collect();
         Ok(ConsistencyReport {
@@ -327,6 +360,24 @@ mod tests {
         assert!((r.per_time[0].rms - want).abs() < 1e-6, "{r:?}");
         assert!((r.rms - want / 2.0).abs() < 1e-6);
         assert_eq!(r.per_object.len(), 1);
+        // Had they stayed at their anchors, the error would be the vehicle's displacement of
+        // them; following exactly but for one offset Gaussian at one time scores near 1.
+        let still: f64 = (0..3)
+            .map(|i| {
+                let a = [0, 1, 2].map(|c| f64::from(anchor[i * 3 + c]));
+                let m = motion.apply(a);
+                (0..3).map(|c| (m[c] - a[c]).powi(2)).sum::<f64>()
+            })
+            .sum();
+        let still = (still / 3.0).sqrt();
+        let o = &r.per_object[0];
+        assert!((o.rms_if_still - still).abs() < 1e-6, "{o:?}");
+        let follow = o.follow().unwrap();
+        assert!((follow - (1.0 - want / 2.0 / still)).abs() < 1e-6);
+        // Gaussians that stay at their anchors follow 0.
+        let mut acc = ConsistencyAccumulator::new();
+        acc.add_time(0.5, &[track], &anchor, &anchor).unwrap();
+        assert!(acc.report().unwrap().per_object[0].follow().unwrap().abs() < 1e-9);
         assert_eq!(r.per_time[0].samples, 3);
     }
 
@@ -345,6 +396,7 @@ mod tests {
         acc.add_time(0.1, &[track], &[1.0, 1.0, 1.0], &[1.0, 1.0, 1.5])
             .unwrap();
         assert!((acc.report().unwrap().rms - 0.5).abs() < 1e-6);
+        assert_eq!(acc.report().unwrap().per_object[0].follow(), None);
         let bad = acc.add_time(0.2, &[track], &[1.0, 1.0], &[1.0, 1.0, 1.0]);
         assert!(matches!(
             bad,

@@ -92,4 +92,15 @@ fn compare_trains_both_runs_and_reports_every_key() {
     assert!(!log("baseline").contains("reg_objects"));
     assert!(log("semdynreg").contains("reg_objects"));
     assert!(Path::new(&out.join("report.html")).is_file());
+
+    // `eval` on a toycars run adds the consistency report beside metrics.json.
+    let base = out.join("baseline");
+    semdynreg(&["eval", base.to_str().unwrap()]);
+    let c: Value = serde_json::from_str(
+        &std::fs::read_to_string(base.join("eval").join("consistency.json")).unwrap(),
+    )
+    .unwrap();
+    assert!(key(&c, "rms").as_f64().is_some_and(f64::is_finite));
+    assert!(key(&c, "per_object.white-suv.follow").as_f64().is_some());
+    assert!(key(&c, "per_object.green-suv.follow").is_null(), "parked");
 }

@@ -1,6 +1,8 @@
 //! `semdynreg eval RUN [--split test]`: PSNR, SSIM and (when the LPIPS weights are found)
 //! LPIPS-AlexNet of the latest checkpoint on a split, written atomically to
-//! `RUN/eval/metrics.json` (`{"mean": {...}, "frames": [...]}`).
+//! `RUN/eval/metrics.json` (`{"mean": {...}, "frames": [...]}`). On a toycars scene (one
+//! with `objects.json`), also the deformation consistency against the vehicles' true motion
+//! and the share of it each moving vehicle's Gaussians follow (`RUN/eval/consistency.json`).
 
 use anyhow::{Context, Result};
 use std::path::PathBuf;
@@ -13,6 +15,9 @@ pub struct Args {
     /// Skip LPIPS even when its weights are in `$SEMDYNREG_WEIGHTS` (default `./weights`).
     #[arg(long)]
     pub no_lpips: bool,
+    /// Skip the deformation-consistency metric of toycars scenes.
+    #[arg(long)]
+    pub no_consistency: bool,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -45,6 +50,30 @@ pub fn run(a: Args) -> Result<()> {
         report.mean.psnr,
         report.mean.ssim,
         report.frames.len(),
+        out.display()
+    );
+    if a.split == "test" && !a.no_consistency {
+        consistency(&a.run)?;
+    }
+    Ok(())
+}
+
+/// Writes and prints the deformation consistency of a toycars run (no-op elsewhere).
+fn consistency(run: &std::path::Path) -> Result<()> {
+    let Some(v) = crate::report::consistency::named_consistency(run)? else {
+        return Ok(());
+    };
+    let out = run.join("eval").join("consistency.json");
+    scene::io::write_json(&out, &v).with_context(|| format!("writing {}", out.display()))?;
+    let mut parts = vec![format!("RMS {:.4}", v["rms"].as_f64().unwrap_or(f64::NAN))];
+    for (name, o) in v["per_object"].as_object().into_iter().flatten() {
+        if let Some(f) = o["follow"].as_f64() {
+            parts.push(format!("{name} follows {:.0} % of its motion", 100.0 * f));
+        }
+    }
+    println!(
+        "deformation consistency: {} → {}",
+        parts.join(", "),
         out.display()
     );
     Ok(())

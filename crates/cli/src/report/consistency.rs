@@ -112,3 +112,37 @@ pub fn run_consistency(run: &Path) -> Result<ConsistencyReport> {
     }
     Ok(acc.report()?)
 }
+
+/// [`run_consistency`] with object names, as JSON for `semdynreg eval`
+/// (`RUN/eval/consistency.json`): `rms`, `per_time`, and per vehicle `rms`, `rms_if_still`
+/// and `follow` (`null` for a vehicle that does not move). `None` when the run's scene has
+/// no `objects.json` (not a toycars scene).
+pub fn named_consistency(run: &Path) -> Result<Option<serde_json::Value>> {
+    let info = RunInfo::load(run)?;
+    let objects_path = info.scene.join("objects.json");
+    if !objects_path.is_file() {
+        return Ok(None);
+    }
+    let objects = ObjectsFile::load(&objects_path)?;
+    let r = run_consistency(run)?;
+    let name = |id: u8| {
+        objects
+            .objects
+            .iter()
+            .find(|o| o.id == id)
+            .map_or_else(|| id.to_string(), |o| o.name.clone())
+    };
+    let per_object: serde_json::Map<String, serde_json::Value> = r
+        .per_object
+        .iter()
+        .map(|o| {
+            let v = serde_json::json!({"rms": o.rms, "rms_if_still": o.rms_if_still,
+                "follow": o.follow()});
+            (name(o.object), v)
+        })
+        .collect();
+    Ok(Some(serde_json::json!({
+        "rms": r.rms, "per_object": per_object, "per_time": r.per_time,
+        "checkpoint": checkpoint::latest(run)?.display().to_string(),
+    })))
+}

@@ -12,7 +12,9 @@
 # vehicle covers, `synth toycars --drive`), W×H (160×120), FRAMES (96), ITERS (3000),
 # SEED (0), POINTS (20000 random initial Gaussians, as `semdynreg demo`), KS ("1 3 8" at λ = LAMBDA_AT_K), LAMBDAS ("0.01 0.1 1" at k = K_AT_LAMBDA),
 # MEMBERSHIP (view: the paper's per-view groups; persistent: `[reg] membership`, run names
-# get a `_persistent` suffix; several invocations into one OUT_DIR share the baseline).
+# get a `_persistent` suffix; several invocations into one OUT_DIR share the baseline),
+# EXTRA (TOML appended to every run's config, baseline included, e.g.
+# EXTRA=$'[field]\ndeform_scale = false'; use a fresh OUT_DIR when you change it).
 # Needs jq for the table. Runs that already finished are reused, so it can be resumed.
 set -euo pipefail
 
@@ -59,6 +61,7 @@ run_config() { # name k lambda
   [ -e "$dir/baseline" ] || ln -s "$(realpath "$BASE")" "$dir/baseline"
   printf '[init]\nrandom_points = %s\n[reg]\nk = %s\nlambda = %s\nmembership = "%s"\n' \
     "$POINTS" "$2" "$3" "$MEMBERSHIP" >"$dir/config.toml"
+  [ -z "${EXTRA:-}" ] || printf '%s\n' "$EXTRA" >>"$dir/config.toml"
   [ -f "$dir/results.json" ] ||
     "$BIN" compare "$SCENE" --out "$dir" --iters "$ITERS" --seed "$SEED" --config "$dir/config.toml"
 }

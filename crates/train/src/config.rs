@@ -58,6 +58,10 @@ pub struct FieldConfig {
     /// enlarged by `visible_margin` (fraction of the image size); others get δ = 0 this step.
     pub visible_only: bool,
     pub visible_margin: f32,
+    /// Apply the field's scale offset δs (Deformable-3DGS: yes). Off, the Gaussians keep their
+    /// size over time: the field can move and turn them but not shrink them out of view, the
+    /// "flip-book" of docs/regularizer.md. δx and δr are unaffected.
+    pub deform_scale: bool,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -174,6 +178,7 @@ impl FieldConfig {
             warm_up: 3000,
             visible_only: false,
             visible_margin: 0.15,
+            deform_scale: true,
         }
     }
 }

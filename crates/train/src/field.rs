@@ -80,7 +80,9 @@ impl DeformField {
             let i = i as usize;
             out.dx[i * 3..i * 3 + 3].copy_from_slice(&o[0..3]);
             out.dr[i * 4..i * 4 + 4].copy_from_slice(&o[3..7]);
-            out.ds[i * 3..i * 3 + 3].copy_from_slice(&o[7..10]);
+            if self.cfg.deform_scale {
+                out.ds[i * 3..i * 3 + 3].copy_from_slice(&o[7..10]);
+            }
         }
     }
 
@@ -91,7 +93,11 @@ impl DeformField {
             let i = i as usize;
             o[0..3].copy_from_slice(&d_delta.dx[i * 3..i * 3 + 3]);
             o[3..7].copy_from_slice(&d_delta.dr[i * 4..i * 4 + 4]);
-            o[7..10].copy_from_slice(&d_delta.ds[i * 3..i * 3 + 3]);
+            if self.cfg.deform_scale {
+                o[7..10].copy_from_slice(&d_delta.ds[i * 3..i * 3 + 3]);
+            } else {
+                o[7..10].fill(0.0); // δs is not applied: no gradient reaches its head
+            }
         }
         self.mlp
             .backward(&self.enc, &self.d_out, &mut self.cache, grad);
@@ -100,5 +106,44 @@ impl DeformField {
     /// Gaussians evaluated by the last forward.
     pub fn rows(&self) -> &[u32] {
         &self.rows
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    /// With `deform_scale = false`, δs is zero and a gradient on it changes nothing.
+    #[test]
+    fn scale_offset_can_be_switched_off() {
+        let cfg = FieldConfig {
+            depth: 2,
+            width: 16,
+            skip: 0,
+            deform_scale: false,
+            ..FieldConfig::default()
+        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let mut f = DeformField::new(&cfg, &mut rng);
+        let means = [0.1, 0.2, 0.3, -0.4, 0.5, 0.0];
+        let mut out = DeformOutput::default();
+        f.forward(&means, 0.3, &[0, 1], &mut out);
+        assert!(out.dx.iter().any(|&v| v != 0.0));
+        assert!(out.ds.iter().all(|&v| v == 0.0));
+        let mut d = DeformOutput::default();
+        d.reset(2);
+        d.dx.fill(0.5);
+        let (mut g0, mut g1) = (Vec::new(), Vec::new());
+        f.backward(&d, &mut g0);
+        d.ds.fill(7.0);
+        f.backward(&d, &mut g1);
+        assert_eq!(g0, g1);
+        // On (the default), δs is the head's output and its gradient counts.
+        f.cfg.deform_scale = true;
+        f.forward(&means, 0.3, &[0, 1], &mut out);
+        assert!(out.ds.iter().any(|&v| v != 0.0));
+        f.backward(&d, &mut g1);
+        assert_ne!(g0, g1);
     }
 }

@@ -87,3 +87,27 @@ for j in (0, len(files) - 1):
     r = S[j][ins_m] / S[mid][ins_m]
     print(f"size at t={inside[j][0]:.1f} / at t={tm:.1f}: median {np.median(r):.2f}, quartiles "
           f"{np.percentile(r, 25):.2f}/{np.percentile(r, 75):.2f}; below 0.2×: {(r < 0.2).mean():.2f}")
+# Where do they go instead? Displacement of the middle-time Gaussians to each end, split
+# into the component along the vehicle's motion and the rest (z = up in toycars).
+for j in (0, len(files) - 1):
+    d = X[j][ins_m] - X[mid][ins_m]
+    n = np.linalg.norm(d, axis=1)
+    print(f"t {tm:.1f}→{inside[j][0]:.1f}: their displacement median {np.median(n):.3f}, "
+          f"z median {np.median(d[:, 2]):+.3f} (quartiles {np.percentile(d[:, 2], 25):+.3f}/"
+          f"{np.percentile(d[:, 2], 75):+.3f})")
+# Do they turn instead (a flat Gaussian seen edge-on disappears)? Angle between their
+# rotations at the middle time and each end, and how flat they are (smallest/largest scale).
+def rots(p):
+    g = read_ply(p)
+    q = np.stack([g['rot_0'], g['rot_1'], g['rot_2'], g['rot_3']], 1)
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+Q = [rots(p) for p in files]
+g_mid = read_ply(files[mid])
+sc = np.exp(np.stack([g_mid['scale_0'], g_mid['scale_1'], g_mid['scale_2']], 1))[ins_m]
+flat = sc.min(1) / sc.max(1)
+print(f"flatness (min/max scale) at t={tm:.1f}: median {np.median(flat):.2f}")
+for j in (0, len(files) - 1):
+    dot = np.abs(np.sum(Q[j][ins_m] * Q[mid][ins_m], 1)).clip(0, 1)
+    ang = np.degrees(2 * np.arccos(dot))
+    print(f"t {tm:.1f}→{inside[j][0]:.1f}: rotation change median {np.median(ang):.0f}°, "
+          f"quartiles {np.percentile(ang, 25):.0f}°/{np.percentile(ang, 75):.0f}°")

@@ -11,6 +11,14 @@ fn saved_run() -> (tempfile::TempDir, std::path::PathBuf) {
     (run, dir)
 }
 
+/// The message of loading the trainer from a checkpoint that must fail.
+fn load_error(dir: &std::path::Path) -> String {
+    checkpoint::load_trainer(dir, common::dataset())
+        .err()
+        .expect("loading should fail")
+        .to_string()
+}
+
 #[test]
 fn fresh_checkpoint_roundtrips() {
     let (_run, dir) = saved_run();
@@ -24,10 +32,7 @@ fn fresh_checkpoint_roundtrips() {
 fn garbage_state_file_is_a_clear_error() {
     let (_run, dir) = saved_run();
     std::fs::write(dir.join(checkpoint::STATE_NAME), b"not safetensors").unwrap();
-    let e = checkpoint::load_trainer(&dir, common::dataset())
-        .err()
-        .unwrap()
-        .to_string();
+    let e = load_error(&dir);
     assert!(
         e.contains("state.safetensors") && e.contains("not a readable safetensors"),
         "{e}"
@@ -52,10 +57,7 @@ fn nan_weights_are_rejected() {
     let at = 8 + hlen + start;
     bytes[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     std::fs::write(&p, bytes).unwrap();
-    let e = checkpoint::load_trainer(&dir, common::dataset())
-        .err()
-        .unwrap()
-        .to_string();
+    let e = load_error(&dir);
     assert!(
         e.contains("field.params") && e.contains("non-finite"),
         "{e}"
@@ -128,10 +130,7 @@ fn hook_rows_roundtrip_and_missing_rows_are_named() {
     let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
     let views: Vec<(String, safetensors::tensor::TensorView)> = st.tensors();
     std::fs::write(&p, safetensors::serialize(views, Some(meta)).unwrap()).unwrap();
-    let e = checkpoint::load_trainer(&dir, common::dataset())
-        .err()
-        .unwrap()
-        .to_string();
+    let e = load_error(&dir);
     assert!(
         e.contains("aux.reg.gone") && e.contains("state.safetensors"),
         "{e}"

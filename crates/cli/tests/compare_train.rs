@@ -1,7 +1,7 @@
 //! End-to-end check of the paper's experiment in one pipeline, on a tiny scene and a very
 //! short schedule: `segment --masks gt` → `compare` in training mode (baseline `--no-reg`
-//! and SemDynReg `--reg`, same seed), which must leave both runs, the regularizer's log and a
-//! results.json with every key of issue 6.
+//! and SemDynReg `--reg` forked from it at the regularizer's start, same seed), which must
+//! leave both runs, the regularizer's log and a results.json with every key of issue 6.
 
 use serde_json::Value;
 use std::path::Path;
@@ -91,6 +91,21 @@ fn compare_trains_both_runs_and_reports_every_key() {
     let log = |run: &str| std::fs::read_to_string(out.join(run).join("metrics.jsonl")).unwrap();
     assert!(!log("baseline").contains("reg_objects"));
     assert!(log("semdynreg").contains("reg_objects"));
+    // SemDynReg started from the baseline's checkpoint at iteration 29 (the regularizer's
+    // fork point), so it trained only the remaining 91 iterations.
+    let commands = key(&results, "commands").as_array().unwrap();
+    assert!(
+        commands
+            .iter()
+            .any(|c| c.as_str().unwrap().contains("train --fork")),
+        "{commands:?}"
+    );
+    assert!(out.join("baseline/checkpoints/iter_0000029").is_dir());
+    let timings: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("semdynreg/timings.json")).unwrap())
+            .unwrap();
+    assert_eq!(key(&timings, "iterations"), 91);
+    assert_eq!(key(&timings, "total_iterations"), 120);
     assert!(Path::new(&out.join("report.html")).is_file());
 
     // `eval` on a toycars run adds the consistency report beside metrics.json.

@@ -107,7 +107,8 @@ fn state_bytes(tr: &Trainer) -> Result<Vec<u8>> {
 }
 
 /// Writes a checkpoint of `tr` under `run/checkpoints/` and points `latest` at it; keeps the
-/// newest `tr.cfg.log.keep_checkpoints`. Returns its folder.
+/// newest `tr.cfg.log.keep_checkpoints`, and the one at the regularizer's fork point
+/// ([`crate::fork`]) when present. Returns its folder.
 pub fn save(tr: &Trainer, run: &Path) -> Result<PathBuf> {
     let root = run.join("checkpoints");
     create_dir_all(&root)?;
@@ -126,18 +127,20 @@ pub fn save(tr: &Trainer, run: &Path) -> Result<PathBuf> {
     }
     std::fs::rename(&tmp, &dst).map_err(|e| TrainError::io(&dst, e))?;
     atomic_write(&root.join("latest"), name.as_bytes())?;
-    prune_old(&root, &name, tr.cfg.log.keep_checkpoints);
+    let pinned = crate::fork::fork_point(&tr.cfg.reg).map(|i| format!("iter_{i:07}"));
+    prune_old(&root, &name, pinned.as_deref(), tr.cfg.log.keep_checkpoints);
     Ok(dst)
 }
 
-/// Removes all but the newest `keep` checkpoints (never `current`); failures only log.
-fn prune_old(root: &Path, current: &str, keep: usize) {
+/// Removes all but the newest `keep` checkpoints (never `current` or `pinned`); failures
+/// only log.
+fn prune_old(root: &Path, current: &str, pinned: Option<&str>, keep: usize) {
     let Ok(rd) = std::fs::read_dir(root) else {
         return;
     };
     let mut names: Vec<String> = rd
         .filter_map(|e| e.ok()?.file_name().into_string().ok())
-        .filter(|n| n.starts_with("iter_"))
+        .filter(|n| n.starts_with("iter_") && Some(n.as_str()) != pinned)
         .collect();
     names.sort();
     let excess = names.len().saturating_sub(keep.max(1));

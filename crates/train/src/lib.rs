@@ -4,7 +4,8 @@
 //! Pieces, in data-flow order: [`model`] (raw canonical Gaussians) and [`state`] (with their
 //! Adam moments and densification statistics, kept row-aligned), [`init`], [`encoding`] +
 //! [`mlp`] = [`field`] (the deformation field), [`deform`] (δ applied and chained back),
-//! [`adam`], [`densify`], the training loop in [`trainer`], and [`checkpoint`]/[`ply`] on disk.
+//! [`adam`], [`densify`], the training loop in [`trainer`], and [`checkpoint`]/[`ply`] on disk;
+//! [`fork`] starts a run from another's checkpoint at the regularizer's start.
 
 pub mod adam;
 pub mod checkpoint;
@@ -14,6 +15,7 @@ pub mod densify;
 pub mod encoding;
 mod error;
 pub mod field;
+pub mod fork;
 mod gemm_util;
 pub mod hook;
 pub mod init;

@@ -176,6 +176,63 @@ fn persistent_membership_votes_survive_densify_and_resume() {
     assert_bit_equal(&a, &c);
 }
 
+/// A SemDynReg run forked from the baseline's checkpoint just before the regularizer's start
+/// ends bit-identical to one trained from scratch (persistent membership, so hook rows are
+/// created after the fork). Checkpoint pruning keeps the fork point, and a checkpoint past
+/// the start is refused with a message that says why.
+#[test]
+fn fork_at_the_regularizer_start_equals_training_from_scratch() {
+    use train::regularizer::{Membership, SemanticHook};
+    let mut cfg = common::small_config(80);
+    cfg.reg.membership = Membership::Persistent;
+    (cfg.reg.start_iter, cfg.reg.end_iter) = (25, 80);
+    (cfg.reg.lambda, cfg.reg.tau_d, cfg.reg.persist_min_weight) = (1.0, 0.0, 0.05);
+    cfg.log.keep_checkpoints = 1;
+    let ds = scene_with_id_maps();
+    let mut reg_cfg = cfg.clone();
+    reg_cfg.reg.enabled = true;
+    let with_hook = |t: &mut Trainer, n: usize| {
+        let mut hook = SemanticHook::load(t.cfg.reg.clone(), &t.dataset).unwrap();
+        for _ in 0..n {
+            t.step_with(Some(&mut hook)).unwrap();
+        }
+    };
+    let mut scratch = Trainer::new(reg_cfg.clone(), ds.clone(), 9).unwrap();
+    with_hook(&mut scratch, 80);
+
+    let run = tempfile::tempdir().unwrap();
+    let mut base = Trainer::new(cfg, ds.clone(), 9).unwrap();
+    for target in [24, 30] {
+        while base.iteration < target {
+            base.step().unwrap();
+        }
+        checkpoint::save(&base, run.path()).unwrap();
+    }
+    let (it, dir) = train::fork::checkpoint_at_or_before(run.path(), 24)
+        .unwrap()
+        .expect("the fork point survives pruning");
+    assert_eq!(it, 24);
+    let late = run.path().join("checkpoints/iter_0000030");
+    let err = train::fork::load_fork(&late, ds.clone(), reg_cfg.clone())
+        .err()
+        .expect("a checkpoint past the start cannot be forked")
+        .to_string();
+    assert!(
+        err.contains("iter_0000030") && err.contains("starts at 25"),
+        "{err}"
+    );
+
+    let mut forked = train::fork::load_fork(&dir, ds, reg_cfg).unwrap();
+    assert!(forked.cfg.reg.enabled);
+    with_hook(&mut forked, 56);
+    assert_bit_equal(&scratch, &forked);
+    // The regularizer mattered: the baseline, continued to 80, ends elsewhere.
+    while base.iteration < 80 {
+        base.step().unwrap();
+    }
+    assert_ne!(base.field.mlp.params, scratch.field.mlp.params);
+}
+
 /// A point cloud with colours (3DGS `fetchPly`) starts each Gaussian at its point's colour:
 /// SH DC = RGB2SH(colour); without colours the start is grey.
 #[test]

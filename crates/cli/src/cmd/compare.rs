@@ -95,11 +95,13 @@ fn train_both(args: &Args) -> Result<Runs> {
             label: "baseline",
             dir: args.out.join("baseline"),
             reg: false,
+            fork_from: None,
         },
         RunPlan {
             label: "semdynreg",
             dir: args.out.join("semdynreg"),
             reg: true,
+            fork_from: Some(args.out.join("baseline")),
         },
     ];
     let mut commands = vec![command_line()];

@@ -1,7 +1,8 @@
 //! `semdynreg train SCENE --out RUN [--config F.toml] [--iters N] [--downscale D]
-//! [--seed S] [--resume]`: deformable 3DGS training (issue 5) with a progress bar, a JSONL
-//! metrics log (`RUN/metrics.jsonl`), periodic test evaluation, and atomic checkpoints every
-//! `log.checkpoint_interval` iterations, at the end, and on Ctrl-C.
+//! [--seed S] [--resume | --fork FROM]`: deformable 3DGS training (issue 5) with a progress
+//! bar, a JSONL metrics log (`RUN/metrics.jsonl`), periodic test evaluation, and atomic
+//! checkpoints every `log.checkpoint_interval` iterations, at the regularizer's fork point,
+//! at the end, and on Ctrl-C.
 
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -46,21 +47,16 @@ pub struct Args {
     /// Train the baseline without the regularizer (the default unless the config enables it).
     #[arg(long)]
     pub no_reg: bool,
+    /// Start from run FROM's checkpoint just before the regularizer's start instead of from
+    /// scratch: exact, since both runs are the same until then. The scene, seed, downscale
+    /// and background are FROM's; --config/--iters/--reg must give FROM's config except in
+    /// [reg] (`compare` does this for its SemDynReg run).
+    #[arg(long, value_name = "FROM", conflicts_with_all = ["scene", "resume", "seed", "downscale", "white_background"])]
+    pub fork: Option<PathBuf>,
 }
 
-fn fresh(a: &Args) -> Result<Trainer> {
-    let Some(scene_dir) = &a.scene else {
-        bail!(
-            "a SCENE folder is required (or --resume to continue {})",
-            a.out.display()
-        );
-    };
-    if a.out.join(train::run::RUN_FILE).exists() {
-        bail!(
-            "{} already holds a run; use --resume or another --out",
-            a.out.display()
-        );
-    }
+/// The config of a new run: the defaults or --config, rescaled by --iters, --reg/--no-reg.
+fn new_config(a: &Args) -> Result<TrainConfig> {
     let mut cfg = match &a.config {
         Some(p) => TrainConfig::from_toml_file(p)?,
         None => TrainConfig::default(),
@@ -71,6 +67,28 @@ fn fresh(a: &Args) -> Result<Trainer> {
     if a.reg || a.no_reg {
         cfg.reg.enabled = a.reg;
     }
+    Ok(cfg)
+}
+
+fn refuse_existing(out: &Path) -> Result<()> {
+    if out.join(train::run::RUN_FILE).exists() {
+        bail!(
+            "{} already holds a run; use --resume or another --out",
+            out.display()
+        );
+    }
+    Ok(())
+}
+
+fn fresh(a: &Args) -> Result<Trainer> {
+    let Some(scene_dir) = &a.scene else {
+        bail!(
+            "a SCENE folder is required (or --resume to continue {})",
+            a.out.display()
+        );
+    };
+    refuse_existing(&a.out)?;
+    let cfg = new_config(a)?;
     let scene = std::fs::canonicalize(scene_dir)
         .with_context(|| format!("scene folder {}", scene_dir.display()))?;
     let bg = if a.white_background { 1.0 } else { 0.0 };
@@ -114,6 +132,70 @@ fn resumed(a: &Args) -> Result<Trainer> {
     Ok(trainer)
 }
 
+/// `--fork FROM`: FROM's run settings, its checkpoint at or before the new config's fork
+/// point, and its metrics log up to there (so the training curves are whole).
+fn forked(a: &Args, from: &Path) -> Result<Trainer> {
+    refuse_existing(&a.out)?;
+    let cfg = new_config(a)?;
+    if !cfg.reg.enabled {
+        bail!(
+            "a fork without the regularizer would repeat {}; pass --reg",
+            from.display()
+        );
+    }
+    let Some(at) = train::fork::fork_point(&cfg.reg) else {
+        bail!(
+            "the regularizer starts at iteration 1: there is nothing to fork; train from scratch"
+        );
+    };
+    let (it, dir) = train::fork::checkpoint_at_or_before(from, at)
+        .with_context(|| format!("looking for checkpoints of {}", from.display()))?
+        .with_context(|| {
+            format!(
+                "{} has no checkpoint at or before iteration {at} (the regularizer's start − 1); \
+                 runs trained by this version keep one there",
+                from.display()
+            )
+        })?;
+    let info = RunInfo::load(from)?;
+    let dataset = info
+        .dataset()
+        .with_context(|| format!("loading {}", info.scene.display()))?;
+    let tr = train::fork::load_fork(&dir, dataset, cfg)?;
+    info.save(&a.out)?;
+    copy_log_until(
+        &from.join("metrics.jsonl"),
+        &a.out.join("metrics.jsonl"),
+        it,
+    )?;
+    let saved = checkpoint::save(&tr, &a.out)?;
+    tracing::info!(
+        iteration = it,
+        "forked from {} into {}",
+        dir.display(),
+        saved.display()
+    );
+    Ok(tr)
+}
+
+/// Copies the lines of a JSONL metrics log whose `iteration` is at most `last`.
+fn copy_log_until(src: &Path, dst: &Path, last: u32) -> Result<()> {
+    let Ok(text) = std::fs::read_to_string(src) else {
+        return Ok(()); // a run without a log forks without one
+    };
+    let mut out = String::new();
+    for line in text.lines() {
+        let v: serde_json::Value = serde_json::from_str(line)
+            .with_context(|| format!("{} has a line that is not JSON: {line}", src.display()))?;
+        if v["iteration"].as_u64().is_some_and(|i| i <= last as u64) {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    scene::io::write_atomic(dst, |w| w.write_all(out.as_bytes()))
+        .with_context(|| format!("writing {}", dst.display()))
+}
+
 fn append_jsonl(path: &Path, value: &serde_json::Value) -> Result<()> {
     let mut f = std::fs::OpenOptions::new()
         .create(true)
@@ -136,7 +218,11 @@ fn progress_bar(tr: &Trainer) -> ProgressBar {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let mut tr = if a.resume { resumed(&a)? } else { fresh(&a)? };
+    let mut tr = match (&a.fork, a.resume) {
+        (Some(from), _) => forked(&a, from)?,
+        (None, true) => resumed(&a)?,
+        (None, false) => fresh(&a)?,
+    };
     let stop = Arc::new(AtomicBool::new(false));
     let s = stop.clone();
     ctrlc::set_handler(move || s.store(true, Ordering::SeqCst))
@@ -186,7 +272,11 @@ pub fn run(a: Args) -> Result<()> {
         }
         let interrupted = stop.load(Ordering::SeqCst);
         tr.train_seconds = before + start.elapsed().as_secs_f64();
-        if (l.checkpoint_interval > 0 && it % l.checkpoint_interval == 0) || interrupted {
+        let fork_point = train::fork::fork_point(&tr.cfg.reg) == Some(it);
+        if (l.checkpoint_interval > 0 && it % l.checkpoint_interval == 0)
+            || fork_point
+            || interrupted
+        {
             let dir = checkpoint::save(&tr, &a.out)?;
             tracing::info!("checkpoint {}", dir.display());
         }

@@ -6,7 +6,7 @@
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use train::{checkpoint, run::RUN_FILE};
+use train::{checkpoint, run::RUN_FILE, TrainConfig};
 
 /// Settings shared by both runs (the same seed and schedule, issue 6).
 #[derive(Clone, Debug)]
@@ -26,6 +26,9 @@ pub struct RunPlan {
     pub dir: PathBuf,
     /// The SemDynReg loss on (`--reg`) or off (`--no-reg`).
     pub reg: bool,
+    /// A run to fork from (`train --fork`) when it holds a checkpoint at the regularizer's
+    /// fork point: SemDynReg starts from the baseline's instead of repeating its first quarter.
+    pub fork_from: Option<PathBuf>,
 }
 
 /// How far a run folder got.
@@ -59,28 +62,37 @@ pub fn run_state(dir: &Path) -> Result<RunState> {
     })
 }
 
-/// `train` arguments for a fresh run, or `--resume` for an unfinished one.
-pub fn train_args(plan: &RunPlan, s: &TrainSettings, state: RunState) -> Vec<String> {
+/// `train` arguments for a fresh run (forked from `fork` when given), or `--resume` for an
+/// unfinished one.
+pub fn train_args(
+    plan: &RunPlan,
+    s: &TrainSettings,
+    state: RunState,
+    fork: Option<&Path>,
+) -> Vec<String> {
     let out = plan.dir.display().to_string();
     if let RunState::Unfinished { .. } = state {
         return vec!["train".into(), "--out".into(), out, "--resume".into()];
     }
-    let mut a = vec![
-        "train".into(),
-        s.scene.display().to_string(),
-        "--out".into(),
-        out,
-    ];
-    a.extend(["--seed".into(), s.seed.to_string()]);
-    a.extend(["--downscale".into(), s.downscale.to_string()]);
+    let mut a: Vec<String> = vec!["train".into()];
+    match fork {
+        // The fork takes scene, seed, downscale and background from the run it starts from.
+        Some(from) => a.extend(["--fork".into(), from.display().to_string()]),
+        None => {
+            a.push(s.scene.display().to_string());
+            a.extend(["--seed".into(), s.seed.to_string()]);
+            a.extend(["--downscale".into(), s.downscale.to_string()]);
+            if s.white_background {
+                a.push("--white-background".into());
+            }
+        }
+    }
+    a.extend(["--out".into(), out]);
     if let Some(n) = s.iters {
         a.extend(["--iters".into(), n.to_string()]);
     }
     if let Some(c) = &s.config {
         a.extend(["--config".into(), c.display().to_string()]);
-    }
-    if s.white_background {
-        a.push("--white-background".into());
     }
     a.push(if plan.reg { "--reg" } else { "--no-reg" }.into());
     a
@@ -101,6 +113,42 @@ pub fn run_self(args: &[String]) -> Result<String> {
     Ok(line)
 }
 
+/// `from` when it holds a checkpoint `plan` can fork from (same settings, before the
+/// regularizer's start), else `None` (train from scratch). A checkpoint whose config differs
+/// outside `[reg]` is an error: the two runs would not share a schedule.
+fn fork_source(from: &Path, plan: &RunPlan, s: &TrainSettings) -> Result<Option<PathBuf>> {
+    let mut cfg = match &s.config {
+        Some(p) => TrainConfig::from_toml_file(p)?,
+        None => TrainConfig::default(),
+    };
+    if let Some(n) = s.iters {
+        cfg = cfg.rescaled(n)?;
+    }
+    cfg.reg.enabled = plan.reg;
+    let Some(at) = train::fork::fork_point(&cfg.reg) else {
+        return Ok(None);
+    };
+    let Some((it, dir)) = train::fork::checkpoint_at_or_before(from, at)? else {
+        tracing::info!(
+            "{}: no checkpoint of {} to fork from; training from scratch",
+            plan.label,
+            from.display()
+        );
+        return Ok(None);
+    };
+    let (src, ..) =
+        checkpoint::load_model(&dir).with_context(|| format!("reading {}", dir.display()))?;
+    if let Some(problem) = train::fork::fork_problem(&src, it, &cfg) {
+        bail!(
+            "{} cannot share its first {it} iterations with {}: {problem}. Delete {} to train both again",
+            from.display(),
+            plan.label,
+            from.display()
+        );
+    }
+    Ok(Some(from.to_path_buf()))
+}
+
 /// Trains (unless finished) and renders the test split of a run; returns the commands run
 /// and the folder of renders (`RUN/renders/test`).
 pub fn prepare_run(plan: &RunPlan, s: &TrainSettings) -> Result<(Vec<String>, PathBuf)> {
@@ -113,7 +161,13 @@ pub fn prepare_run(plan: &RunPlan, s: &TrainSettings) -> Result<(Vec<String>, Pa
                 plan.dir.display()
             )
         }
-        state => commands.push(run_self(&train_args(plan, s, state))?),
+        state => {
+            let fork = match (state, &plan.fork_from) {
+                (RunState::Missing, Some(from)) => fork_source(from, plan, s)?,
+                _ => None,
+            };
+            commands.push(run_self(&train_args(plan, s, state, fork.as_deref()))?)
+        }
     }
     let dir = plan.dir.display().to_string();
     commands.push(run_self(&[
@@ -143,14 +197,25 @@ mod tests {
             label: "ours",
             dir: "out/semdynreg".into(),
             reg: true,
+            fork_from: None,
         };
-        let a = train_args(&plan, &s, RunState::Missing).join(" ");
+        let a = train_args(&plan, &s, RunState::Missing, None).join(" ");
         assert_eq!(
             a,
-            "train sc --out out/semdynreg --seed 7 --downscale 2 --iters 300 --reg"
+            "train sc --seed 7 --downscale 2 --out out/semdynreg --iters 300 --reg"
+        );
+        let fork = train_args(
+            &plan,
+            &s,
+            RunState::Missing,
+            Some(Path::new("out/baseline")),
+        );
+        assert_eq!(
+            fork.join(" "),
+            "train --fork out/baseline --out out/semdynreg --iters 300 --reg"
         );
         let plan = RunPlan { reg: false, ..plan };
-        assert!(train_args(&plan, &s, RunState::Missing)
+        assert!(train_args(&plan, &s, RunState::Missing, None)
             .join(" ")
             .ends_with("--no-reg"));
         let resume = train_args(
@@ -160,6 +225,7 @@ mod tests {
                 iteration: 5,
                 total: 300,
             },
+            None,
         );
         assert_eq!(resume.join(" "), "train --out out/semdynreg --resume");
     }

@@ -277,6 +277,19 @@ impl TrainConfig {
         Ok(cfg)
     }
 
+    /// The config of a new run as the CLI builds it: `file` (or the defaults), rescaled to
+    /// `iters` iterations when given.
+    pub fn for_run(file: Option<&Path>, iters: Option<u32>) -> Result<Self> {
+        let cfg = match file {
+            Some(p) => Self::from_toml_file(p)?,
+            None => Self::default(),
+        };
+        match iters {
+            Some(n) => cfg.rescaled(n),
+            None => Ok(cfg),
+        }
+    }
+
     pub fn to_toml(&self) -> String {
         toml::to_string_pretty(self).expect("config serializes: plain numbers and bools only")
     }

@@ -57,13 +57,7 @@ pub struct Args {
 
 /// The config of a new run: the defaults or --config, rescaled by --iters, --reg/--no-reg.
 fn new_config(a: &Args) -> Result<TrainConfig> {
-    let mut cfg = match &a.config {
-        Some(p) => TrainConfig::from_toml_file(p)?,
-        None => TrainConfig::default(),
-    };
-    if let Some(n) = a.iters {
-        cfg = cfg.rescaled(n)?;
-    }
+    let mut cfg = TrainConfig::for_run(a.config.as_deref(), a.iters)?;
     if a.reg || a.no_reg {
         cfg.reg.enabled = a.reg;
     }

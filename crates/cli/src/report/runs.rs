@@ -117,13 +117,7 @@ pub fn run_self(args: &[String]) -> Result<String> {
 /// regularizer's start), else `None` (train from scratch). A checkpoint whose config differs
 /// outside `[reg]` is an error: the two runs would not share a schedule.
 fn fork_source(from: &Path, plan: &RunPlan, s: &TrainSettings) -> Result<Option<PathBuf>> {
-    let mut cfg = match &s.config {
-        Some(p) => TrainConfig::from_toml_file(p)?,
-        None => TrainConfig::default(),
-    };
-    if let Some(n) = s.iters {
-        cfg = cfg.rescaled(n)?;
-    }
+    let mut cfg = TrainConfig::for_run(s.config.as_deref(), s.iters)?;
     cfg.reg.enabled = plan.reg;
     let Some(at) = train::fork::fork_point(&cfg.reg) else {
         return Ok(None);

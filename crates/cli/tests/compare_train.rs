@@ -20,6 +20,16 @@ fn semdynreg(args: &[&str]) {
     );
 }
 
+/// Runs `semdynreg ARGS`, which must fail; returns its stderr.
+fn semdynreg_err(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_semdynreg"))
+        .args(args)
+        .output()
+        .expect("run semdynreg");
+    assert!(!out.status.success(), "semdynreg {args:?} should fail");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
 fn key<'a>(v: &'a Value, path: &str) -> &'a Value {
     path.split('.').fold(v, |v, k| {
         v.get(k).unwrap_or_else(|| panic!("missing key {path}"))
@@ -106,6 +116,23 @@ fn compare_trains_both_runs_and_reports_every_key() {
             .unwrap();
     assert_eq!(key(&timings, "iterations"), 91);
     assert_eq!(key(&timings, "total_iterations"), 120);
+    // A fork on another schedule finds no checkpoint before its own start and says so.
+    let base_s = out.join("baseline");
+    let err = semdynreg_err(&[
+        "train",
+        "--fork",
+        base_s.to_str().unwrap(),
+        "--out",
+        tmp.path().join("other").to_str().unwrap(),
+        "--iters",
+        "60",
+        "--reg",
+    ]);
+    assert!(
+        err.contains("no checkpoint at or before iteration 14"),
+        "{err}"
+    );
+    assert!(!tmp.path().join("other").exists(), "nothing written");
     assert!(Path::new(&out.join("report.html")).is_file());
 
     // `eval` on a toycars run adds the consistency report beside metrics.json.

@@ -305,6 +305,8 @@ impl Trainer {
                 .map_err(|e| TrainError::Hook(e.to_string()))?;
             tm.record(Phase::Hook, t0);
         }
+        let projection = ws.raster.timings().project;
+        tm.move_seconds(Phase::RasterForward, Phase::Projection, projection);
         Ok((loss, psnr, extra_loss))
     }
 
@@ -318,6 +320,8 @@ impl Trainer {
         ws.raster
             .backward(&g, &frame.camera, &opts, &ws.dl_dimage, None, &mut ws.grads)?;
         tm.record(Phase::RasterBackward, t0);
+        let projection = ws.raster.timings().project;
+        tm.move_seconds(Phase::RasterBackward, Phase::ProjectionBackward, projection);
         let t0 = std::time::Instant::now();
         deform::backward(
             model,

@@ -24,7 +24,9 @@ pub struct Args {
     /// Scene folder (D-NeRF layout; toycars adds `masks/` and `objects.json`).
     pub scene: PathBuf,
     /// Output folder: the runs (`baseline/`, `semdynreg/`), results.json, report.md,
-    /// report.html and their images. Finished runs found there are reused.
+    /// report.html and their images. Finished runs found there are reused, unfinished ones
+    /// resumed; SemDynReg starts from the baseline's checkpoint at the regularizer's start
+    /// (`train --fork`) when the baseline has one.
     #[arg(long)]
     pub out: PathBuf,
     /// Rescale both runs' schedule to N iterations (default: the full 40k).

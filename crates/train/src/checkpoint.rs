@@ -258,7 +258,8 @@ fn read_aux(sf: &StateFile<'_>, n: usize) -> Result<Vec<AuxRows>> {
     Ok(out)
 }
 
-fn read_config(dir: &Path) -> Result<TrainConfig> {
+/// The resolved config a checkpoint was trained with (without reading its tensors).
+pub fn read_config(dir: &Path) -> Result<TrainConfig> {
     TrainConfig::from_toml_file(&dir.join(CONFIG_NAME))
 }
 

@@ -76,14 +76,13 @@ pub fn checkpoint_at_or_before(run: &Path, at: u32) -> Result<Option<(u32, PathB
 /// Loads the checkpoint `dir` as the start of a run configured by `cfg`: the state is the
 /// checkpoint's, the config `cfg`, which may differ from the checkpoint's only in `[reg]`.
 pub fn load_fork(dir: &Path, dataset: scene::Dataset, cfg: TrainConfig) -> Result<Trainer> {
-    let (src, _, _, iteration) = checkpoint::load_model(dir)?;
-    if let Some(problem) = fork_problem(&src, iteration, &cfg) {
+    let mut tr = checkpoint::load_trainer(dir, dataset)?;
+    if let Some(problem) = fork_problem(&tr.cfg, tr.iteration, &cfg) {
         return Err(TrainError::Checkpoint {
             path: dir.to_path_buf(),
             problem: format!("cannot fork from it: {problem}"),
         });
     }
-    let mut tr = checkpoint::load_trainer(dir, dataset)?;
     tr.cfg = cfg;
     Ok(tr)
 }

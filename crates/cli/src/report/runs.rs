@@ -130,8 +130,7 @@ fn fork_source(from: &Path, plan: &RunPlan, s: &TrainSettings) -> Result<Option<
         );
         return Ok(None);
     };
-    let (src, ..) =
-        checkpoint::load_model(&dir).with_context(|| format!("reading {}", dir.display()))?;
+    let src = checkpoint::read_config(&dir)?;
     if let Some(problem) = train::fork::fork_problem(&src, it, &cfg) {
         bail!(
             "{} cannot share its first {it} iterations with {}: {problem}. Delete {} to train both again",

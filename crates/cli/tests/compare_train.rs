@@ -145,4 +145,37 @@ fn compare_trains_both_runs_and_reports_every_key() {
     assert!(key(&c, "rms").as_f64().is_some_and(f64::is_finite));
     assert!(key(&c, "per_object.white-suv.follow").as_f64().is_some());
     assert!(key(&c, "per_object.green-suv.follow").is_null(), "parked");
+    older_checkpoints_are_scored_apart(&base);
+}
+
+/// `eval --iteration N` scores an older checkpoint (here the fork point, 29) into
+/// `eval/iter_NNNNNNN/` and leaves the latest checkpoint's results as they were.
+fn older_checkpoints_are_scored_apart(base: &Path) {
+    let read = |p: &Path| std::fs::read_to_string(p).unwrap();
+    let latest_path = base.join("eval").join("metrics.json");
+    let latest_text = read(&latest_path);
+    let latest: Value = serde_json::from_str(&latest_text).unwrap();
+    assert_eq!(key(&latest, "iteration").as_u64(), Some(120));
+    let base_s = base.to_str().unwrap();
+    semdynreg(&["eval", base_s, "--iteration", "29", "--no-consistency"]);
+    let older_path = base.join("eval").join("iter_0000029").join("metrics.json");
+    let older: Value = serde_json::from_str(&read(&older_path)).unwrap();
+    assert_eq!(key(&older, "iteration").as_u64(), Some(29));
+    let psnr = |v: &Value| key(v, "mean.psnr").as_f64().unwrap();
+    assert!(psnr(&older).is_finite());
+    assert_ne!(
+        psnr(&older),
+        psnr(&latest),
+        "a different checkpoint was scored"
+    );
+    assert_eq!(
+        read(&latest_path),
+        latest_text,
+        "the latest's results are kept"
+    );
+    let err = semdynreg_err(&["eval", base_s, "--iteration", "7"]);
+    assert!(
+        err.contains("holds no checkpoint of iteration 7 (it holds: ") && err.contains("29"),
+        "{err}"
+    );
 }

@@ -165,6 +165,47 @@ pub fn latest(run: &Path) -> Result<PathBuf> {
     Ok(dir)
 }
 
+/// The iterations of the checkpoints `run` holds, ascending (an empty list when it has
+/// none yet).
+pub fn iterations(run: &Path) -> Result<Vec<(u32, PathBuf)>> {
+    let root = run.join("checkpoints");
+    if !root.is_dir() {
+        return Ok(Vec::new());
+    }
+    let rd = std::fs::read_dir(&root).map_err(|e| TrainError::io(&root, e))?;
+    let mut found = Vec::new();
+    for e in rd {
+        let e = e.map_err(|e| TrainError::io(&root, e))?;
+        let name = e.file_name().to_string_lossy().into_owned();
+        if let Some(it) = name.strip_prefix("iter_").and_then(|s| s.parse().ok()) {
+            found.push((it, e.path()));
+        }
+    }
+    found.sort();
+    Ok(found)
+}
+
+/// Folder of the checkpoint of `run` at `iteration`, or of its latest when `None`.
+pub fn select(run: &Path, iteration: Option<u32>) -> Result<PathBuf> {
+    let Some(it) = iteration else {
+        return latest(run);
+    };
+    let held = iterations(run)?;
+    if let Some((_, dir)) = held.iter().find(|(i, _)| *i == it) {
+        return Ok(dir.clone());
+    }
+    let list: Vec<String> = held.iter().map(|(i, _)| i.to_string()).collect();
+    Err(TrainError::NoSuchCheckpoint {
+        folder: run.join("checkpoints"),
+        iteration: it,
+        held: if list.is_empty() {
+            "none".into()
+        } else {
+            list.join(", ")
+        },
+    })
+}
+
 /// Parsed `state.safetensors`.
 struct StateFile<'a> {
     st: SafeTensors<'a>,
@@ -362,4 +403,40 @@ pub fn load_trainer(dir: &Path, dataset: scene::Dataset) -> Result<Trainer> {
         )));
     }
     Ok(tr)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn select_finds_a_held_iteration_and_lists_them_otherwise() {
+        let run = tempfile::tempdir().unwrap();
+        assert!(iterations(run.path()).unwrap().is_empty(), "no folder yet");
+        let root = run.path().join("checkpoints");
+        for name in ["iter_0000020", "iter_0000005", ".iter_0000030.tmp"] {
+            std::fs::create_dir_all(root.join(name)).unwrap();
+        }
+        std::fs::write(root.join("latest"), "iter_0000020").unwrap();
+        let its: Vec<u32> = iterations(run.path())
+            .unwrap()
+            .iter()
+            .map(|p| p.0)
+            .collect();
+        assert_eq!(
+            its,
+            [5, 20],
+            "sorted; the unfinished temporary one is not a checkpoint"
+        );
+        assert_eq!(select(run.path(), None).unwrap(), root.join("iter_0000020"));
+        assert_eq!(
+            select(run.path(), Some(5)).unwrap(),
+            root.join("iter_0000005")
+        );
+        let err = select(run.path(), Some(30)).unwrap_err().to_string();
+        assert!(
+            err.contains("no checkpoint of iteration 30 (it holds: 5, 20)"),
+            "{err}"
+        );
+    }
 }

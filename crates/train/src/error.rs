@@ -20,6 +20,12 @@ pub enum TrainError {
     Ply { path: PathBuf, problem: String },
     #[error("bad checkpoint {path}: {problem}")]
     Checkpoint { path: PathBuf, problem: String },
+    #[error("{folder} holds no checkpoint of iteration {iteration} (it holds: {held})")]
+    NoSuchCheckpoint {
+        folder: PathBuf,
+        iteration: u32,
+        held: String,
+    },
     #[error("buffer `{name}` has length {got}, expected {expected}")]
     Length {
         name: &'static str,

@@ -54,23 +54,8 @@ pub fn fork_problem(src: &TrainConfig, iteration: u32, dst: &TrainConfig) -> Opt
 
 /// The newest checkpoint of `run` at or before iteration `at`, with its iteration.
 pub fn checkpoint_at_or_before(run: &Path, at: u32) -> Result<Option<(u32, PathBuf)>> {
-    let root = run.join("checkpoints");
-    let rd = std::fs::read_dir(&root).map_err(|e| TrainError::io(&root, e))?;
-    let mut best: Option<(u32, PathBuf)> = None;
-    for e in rd {
-        let e = e.map_err(|e| TrainError::io(&root, e))?;
-        let name = e.file_name().to_string_lossy().into_owned();
-        let Some(it) = name
-            .strip_prefix("iter_")
-            .and_then(|s| s.parse::<u32>().ok())
-        else {
-            continue;
-        };
-        if it <= at && best.as_ref().is_none_or(|(b, _)| it > *b) {
-            best = Some((it, e.path()));
-        }
-    }
-    Ok(best)
+    let held = checkpoint::iterations(run)?;
+    Ok(held.into_iter().rev().find(|(it, _)| *it <= at))
 }
 
 /// Loads the checkpoint `dir` as the start of a run configured by `cfg`: the state is the

@@ -270,7 +270,7 @@ fn object_name(set: &EvalSet, id: u8) -> String {
 
 /// The run's consistency report, or `None` with the reason added to `notes`.
 fn consistency(run: &Path, notes: &mut Vec<String>) -> Option<ConsistencyReport> {
-    match run_consistency(run) {
+    match run_consistency(run, None) {
         Ok(r) => Some(r),
         Err(e) => {
             notes.push(format!(

@@ -1,17 +1,25 @@
-//! `semdynreg eval RUN [--split test]`: PSNR, SSIM and (when the LPIPS weights are found)
-//! LPIPS-AlexNet of the latest checkpoint on a split, written atomically to
-//! `RUN/eval/metrics.json` (`{"mean": {...}, "frames": [...]}`). On a toycars scene (one
+//! `semdynreg eval RUN [--split test] [--iteration N]`: PSNR, SSIM and (when the LPIPS
+//! weights are found) LPIPS-AlexNet of the latest checkpoint (or iteration N's) on a split,
+//! written atomically to `RUN/eval/metrics.json` (`RUN/eval/iter_NNNNNNN/` with
+//! `--iteration`; `{"mean": {...}, "frames": [...]}`). On a toycars scene (one
 //! with `objects.json`), also the deformation consistency against the vehicles' true motion
 //! and the share of it each moving vehicle's Gaussians follow (`RUN/eval/consistency.json`).
 
 use anyhow::{Context, Result};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
+/// PSNR, SSIM, LPIPS (and, on toycars, deformation consistency) of a run's checkpoint.
 #[derive(clap::Args, Debug)]
 pub struct Args {
+    /// Run folder made by `semdynreg train`.
     pub run: PathBuf,
+    /// Which cameras to score: train, val or test.
     #[arg(long, default_value = "test")]
     pub split: String,
+    /// Score the checkpoint of this iteration instead of the latest; the results then go
+    /// to `RUN/eval/iter_NNNNNNN/`.
+    #[arg(long)]
+    pub iteration: Option<u32>,
     /// Skip LPIPS even when its weights are in `$SEMDYNREG_WEIGHTS` (default `./weights`).
     #[arg(long)]
     pub no_lpips: bool,
@@ -21,7 +29,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let mut loaded = super::render::LoadedRun::open(&a.run)?;
+    let mut loaded = super::render::LoadedRun::open(&a.run, a.iteration)?;
     let frames = loaded.split(&a.split)?.to_vec();
     let (net, lpips_text) = if a.no_lpips {
         (None, "not computed (--no-lpips)".to_string())
@@ -37,33 +45,39 @@ pub fn run(a: Args) -> Result<()> {
     });
     let scorer = score.as_mut().map(|f| f as train::render::FrameScorer);
     let report = loaded.evaluate(&frames, scorer)?;
-    let out = a.run.join("eval").join("metrics.json");
-    std::fs::create_dir_all(a.run.join("eval")).context("creating eval folder")?;
-    scene::io::write_json(&out, &report).with_context(|| format!("writing {}", out.display()))?;
+    let out_dir = super::render::output_dir(&a.run, "eval", a.iteration);
+    std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    let out = out_dir.join("metrics.json");
+    // The scores plus which checkpoint they are of (`--iteration` picks older ones).
+    let mut json = serde_json::to_value(&report).context("serializing the metrics")?;
+    json["iteration"] = loaded.iteration.into();
+    json["split"] = a.split.clone().into();
+    scene::io::write_json(&out, &json).with_context(|| format!("writing {}", out.display()))?;
     let lpips = match report.mean.lpips {
         Some(v) => format!("LPIPS {v:.4}"),
         None => format!("LPIPS {lpips_text}"),
     };
     println!(
-        "{}: PSNR {:.3} SSIM {:.4} {lpips} over {} frames → {}",
+        "{} (iteration {}): PSNR {:.3} SSIM {:.4} {lpips} over {} frames → {}",
         a.split,
+        loaded.iteration,
         report.mean.psnr,
         report.mean.ssim,
         report.frames.len(),
         out.display()
     );
     if a.split == "test" && !a.no_consistency {
-        consistency(&a.run)?;
+        consistency(&a.run, a.iteration, &out_dir)?;
     }
     Ok(())
 }
 
 /// Writes and prints the deformation consistency of a toycars run (no-op elsewhere).
-fn consistency(run: &std::path::Path) -> Result<()> {
-    let Some(v) = crate::report::consistency::named_consistency(run)? else {
+fn consistency(run: &Path, iteration: Option<u32>, out_dir: &Path) -> Result<()> {
+    let Some(v) = crate::report::consistency::named_consistency(run, iteration)? else {
         return Ok(());
     };
-    let out = run.join("eval").join("consistency.json");
+    let out = out_dir.join("consistency.json");
     scene::io::write_json(&out, &v).with_context(|| format!("writing {}", out.display()))?;
     let mut parts = vec![format!("RMS {:.4}", v["rms"].as_f64().unwrap_or(f64::NAN))];
     for (name, o) in v["per_object"].as_object().into_iter().flatten() {

@@ -1,11 +1,14 @@
-//! `semdynreg export RUN --time T --out F.ply` or `--times a:b:step --out DIR`: the
-//! Gaussians deformed to time t, as standard 3DGS PLYs any viewer opens.
+//! `semdynreg export RUN --time T --out F.ply` or `--times a:b:step --out DIR`
+//! `[--iteration N]`: the Gaussians deformed to time t, as standard 3DGS PLYs any viewer
+//! opens.
 
 use anyhow::{bail, Context, Result};
 use std::path::PathBuf;
 
+/// The Gaussians deformed to time t as standard 3DGS PLY files (any splat viewer opens them).
 #[derive(clap::Args, Debug)]
 pub struct Args {
+    /// Run folder made by `semdynreg train`.
     pub run: PathBuf,
     /// One time in [0, 1]; --out is the PLY file.
     #[arg(long, conflicts_with = "times")]
@@ -13,8 +16,12 @@ pub struct Args {
     /// A sequence `a:b:step` (inclusive of b within rounding); --out is a folder.
     #[arg(long)]
     pub times: Option<String>,
+    /// The PLY file (`--time`) or the folder of `t_0.0000.ply`, … files (`--times`).
     #[arg(long)]
     pub out: PathBuf,
+    /// Use the checkpoint of this iteration instead of the latest.
+    #[arg(long)]
+    pub iteration: Option<u32>,
 }
 
 /// Parses `a:b:step` into the times a, a+step, … ≤ b.
@@ -43,7 +50,7 @@ pub fn parse_times(s: &str) -> Result<Vec<f32>> {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let mut r = super::render::LoadedRun::open(&a.run)?;
+    let mut r = super::render::LoadedRun::open(&a.run, a.iteration)?;
     let (times, single) = match (&a.time, &a.times) {
         (Some(t), None) if (0.0..=1.0).contains(t) => (vec![*t], true),
         (Some(t), None) => bail!("--time {t} is outside [0, 1]"),

@@ -10,6 +10,7 @@ use metrics::{BBox, Lpips, LpipsNet, Scores, SsimVariant};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
+/// PSNR, SSIM and LPIPS of images (or folders of images) against references.
 #[derive(clap::Args)]
 pub struct Args {
     /// Image (or folder of images) to score, e.g. renders.

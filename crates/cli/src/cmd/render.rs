@@ -1,6 +1,7 @@
-//! `semdynreg render RUN [--split test] [--time T]`: PNGs of a split's cameras from the
-//! latest checkpoint, each at its own time or all at time T, into `RUN/renders/<split>/`,
-//! named after the frame (`r_007.png`, or `r_007_t0.500.png` with `--time`).
+//! `semdynreg render RUN [--split test] [--time T] [--iteration N]`: PNGs of a split's
+//! cameras from the latest checkpoint (or iteration N's), each at its own time or all at
+//! time T, into `RUN/renders/<split>/` (`RUN/renders/iter_NNNNNNN/<split>/` with
+//! `--iteration`), named after the frame (`r_007.png`, or `r_007_t0.500.png` with `--time`).
 //! Also holds [`LoadedRun`], shared by `eval` and `export`.
 
 use anyhow::{bail, Context, Result};
@@ -8,17 +9,34 @@ use std::path::{Path, PathBuf};
 use train::render::{EvalReport, Renderer};
 use train::{checkpoint, DeformField, GaussianModel, TrainConfig};
 
+/// PNGs of a split's cameras from a run's latest (or chosen) checkpoint.
 #[derive(clap::Args, Debug)]
 pub struct Args {
+    /// Run folder made by `semdynreg train`.
     pub run: PathBuf,
+    /// Which cameras: train, val or test.
     #[arg(long, default_value = "test")]
     pub split: String,
     /// Render every camera at this time in [0, 1] instead of its own.
     #[arg(long)]
     pub time: Option<f32>,
+    /// Use the checkpoint of this iteration instead of the latest; the PNGs then go to
+    /// `RUN/renders/iter_NNNNNNN/<split>/`.
+    #[arg(long)]
+    pub iteration: Option<u32>,
 }
 
-/// The latest checkpoint of a run with its data set.
+/// Where a command that reads a checkpoint writes its outputs: `RUN/<what>` for the
+/// latest checkpoint, `RUN/<what>/iter_NNNNNNN` for one chosen with `--iteration`, so
+/// that evaluating an older checkpoint never overwrites the latest one's results.
+pub fn output_dir(run: &Path, what: &str, iteration: Option<u32>) -> PathBuf {
+    match iteration {
+        None => run.join(what),
+        Some(it) => run.join(what).join(format!("iter_{it:07}")),
+    }
+}
+
+/// One checkpoint of a run (the latest unless chosen) with its data set.
 pub struct LoadedRun {
     pub cfg: TrainConfig,
     pub model: GaussianModel,
@@ -29,9 +47,9 @@ pub struct LoadedRun {
 }
 
 impl LoadedRun {
-    pub fn open(run: &Path) -> Result<Self> {
+    pub fn open(run: &Path, iteration: Option<u32>) -> Result<Self> {
         let info = train::run::RunInfo::load(run)?;
-        let dir = checkpoint::latest(run)?;
+        let dir = checkpoint::select(run, iteration)?;
         let (cfg, model, field, iteration) =
             checkpoint::load_model(&dir).with_context(|| format!("loading {}", dir.display()))?;
         let dataset = info
@@ -84,14 +102,14 @@ fn frame_stem(file_path: &str, index: usize) -> String {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let mut r = LoadedRun::open(&a.run)?;
+    let mut r = LoadedRun::open(&a.run, a.iteration)?;
     if let Some(t) = a.time {
         if !(0.0..=1.0).contains(&t) {
             bail!("--time {t} is outside [0, 1]");
         }
     }
     let frames = r.split(&a.split)?.to_vec();
-    let dir = a.run.join("renders").join(&a.split);
+    let dir = output_dir(&a.run, "renders", a.iteration).join(&a.split);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let bg = r.dataset.background;
     for (i, fr) in frames.iter().enumerate() {

@@ -13,6 +13,7 @@ use std::io::{BufReader, BufWriter};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+/// Render one rasterizer case (.npz) with its gradients, to compare with another renderer.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Input case (.npz with means, quats, log_scales, opacity_logits, sh/colors, camera, weights).

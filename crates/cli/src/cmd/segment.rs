@@ -21,6 +21,7 @@ pub enum Masks {
     Gt,
 }
 
+/// Object-ID maps of a scene's training frames (SAM masks + CLIP labels), for `train --reg`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Scene folder (D-NeRF layout; ground-truth masks in SCENE/masks for `gt` modes).
@@ -35,8 +36,12 @@ pub struct Args {
     /// CLIP checkpoint (safetensors) for `--labels clip`.
     #[arg(long)]
     pub clip: Option<PathBuf>,
+    /// How masks get an object: `clip` scores each against the dictionary (needs
+    /// --clip), `gt` takes the ground-truth object it overlaps most (toycars `masks/`).
     #[arg(long, value_enum, default_value = "clip")]
     pub labels: Labels,
+    /// Where masks come from: `sam` (automatic mask generation) or `gt` (the scene's
+    /// ground-truth masks, to separate segmentation errors from the regularizer's).
     #[arg(long, value_enum, default_value = "sam")]
     pub masks: Masks,
     /// SAM point grid side (32 = SAM's default).
@@ -48,10 +53,13 @@ pub struct Args {
     /// Relevance threshold τ (DESIGN.md).
     #[arg(long, default_value_t = 0.5)]
     pub tau: f32,
+    /// Keep masks whose predicted IoU is at least this (SAM's automatic generator).
     #[arg(long, default_value_t = 0.88)]
     pub pred_iou_thresh: f32,
+    /// Keep masks whose stability score is at least this (SAM's automatic generator).
     #[arg(long, default_value_t = 0.95)]
     pub stability_thresh: f32,
+    /// Box IoU above which the lower-scored of two masks is dropped.
     #[arg(long, default_value_t = 0.7)]
     pub nms_thresh: f32,
     /// Holes / islands smaller than this many pixels are removed from each mask.

@@ -6,6 +6,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use scene::toycars::{generate, Preset, ToycarsConfig};
 use std::path::PathBuf;
 
+/// Generate a built-in synthetic scene with ground truth (toycars).
 #[derive(ClapArgs)]
 pub struct Args {
     #[command(subcommand)]
@@ -27,8 +28,10 @@ struct ToycarsArgs {
     /// scene1: the white SUV drives; scene2: the yellow sedan drives.
     #[arg(long, default_value = "scene1")]
     preset: Preset,
+    /// Image width in pixels.
     #[arg(long, default_value_t = 480)]
     width: u32,
+    /// Image height in pixels.
     #[arg(long, default_value_t = 360)]
     height: u32,
     /// Number of frames (time 0..1 stands for 6 s).

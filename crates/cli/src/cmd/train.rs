@@ -16,6 +16,7 @@ use train::regularizer::SemanticHook;
 use train::run::RunInfo;
 use train::{checkpoint, TrainConfig, Trainer};
 
+/// Train deformable 3DGS (the baseline, or SemDynReg with --reg); resumable with Ctrl-C.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Scene folder (D-NeRF/Blender layout, toycars, or Nerfies). Optional with --resume.
@@ -32,6 +33,7 @@ pub struct Args {
     /// Integer image downscale factor.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
+    /// Seed of the initial points and the camera order: the same seed gives the same run.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Composite RGBA images on white instead of black.

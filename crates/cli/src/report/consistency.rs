@@ -51,18 +51,19 @@ fn at_time(model: &GaussianModel, field: &mut Option<DeformField>, t: f32) -> Ga
     deformed_model(model, field.as_mut(), t)
 }
 
-/// The metric for the latest checkpoint of `run`, over its scene's test frames.
-pub fn run_consistency(run: &Path) -> Result<ConsistencyReport> {
+/// The metric for the latest checkpoint of `run` (or iteration's), over its scene's test
+/// frames.
+pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<ConsistencyReport> {
     let info = RunInfo::load(run)?;
     let ds = info
         .dataset()
         .with_context(|| format!("loading {}", info.scene.display()))?;
     let objects_path = info.scene.join("objects.json");
     let objects = ObjectsFile::load(&objects_path)?;
-    let dir = checkpoint::latest(run)?;
-    let (cfg, model, field, iteration) =
+    let dir = checkpoint::select(run, iteration)?;
+    let (cfg, model, field, at) =
         checkpoint::load_model(&dir).with_context(|| format!("loading {}", dir.display()))?;
-    let mut field = (iteration >= cfg.field.warm_up).then_some(field);
+    let mut field = (at >= cfg.field.warm_up).then_some(field);
     let mut test: Vec<&Frame> = ds.test.iter().collect();
     test.sort_by(|a, b| a.time.total_cmp(&b.time));
     let Some(reference) = test.first().copied() else {
@@ -117,14 +118,14 @@ pub fn run_consistency(run: &Path) -> Result<ConsistencyReport> {
 /// (`RUN/eval/consistency.json`): `rms`, `per_time`, and per vehicle `rms`, `rms_if_still`
 /// and `follow` (`null` for a vehicle that does not move). `None` when the run's scene has
 /// no `objects.json` (not a toycars scene).
-pub fn named_consistency(run: &Path) -> Result<Option<serde_json::Value>> {
+pub fn named_consistency(run: &Path, iteration: Option<u32>) -> Result<Option<serde_json::Value>> {
     let info = RunInfo::load(run)?;
     let objects_path = info.scene.join("objects.json");
     if !objects_path.is_file() {
         return Ok(None);
     }
     let objects = ObjectsFile::load(&objects_path)?;
-    let r = run_consistency(run)?;
+    let r = run_consistency(run, iteration)?;
     let name = |id: u8| {
         objects
             .objects
@@ -143,6 +144,6 @@ pub fn named_consistency(run: &Path) -> Result<Option<serde_json::Value>> {
         .collect();
     Ok(Some(serde_json::json!({
         "rms": r.rms, "per_object": per_object, "per_time": r.per_time,
-        "checkpoint": checkpoint::latest(run)?.display().to_string(),
+        "checkpoint": checkpoint::select(run, iteration)?.display().to_string(),
     })))
 }

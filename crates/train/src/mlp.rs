@@ -175,10 +175,8 @@ impl Mlp {
         let b = self.bias(l);
         for row in o.chunks_exact_mut(ly.fan_out) {
             for (v, bb) in row.iter_mut().zip(b) {
-                *v += bb;
-                if relu && *v < 0.0 {
-                    *v = 0.0;
-                }
+                let s = *v + bb;
+                *v = if relu && s < 0.0 { 0.0 } else { s };
             }
         }
     }
@@ -251,10 +249,12 @@ impl Mlp {
         for l in (0..=depth).rev() {
             if l < depth {
                 // ReLU: the stored output is > 0 exactly where the pre-activation was.
+                // A select with an unconditional store, not `if a <= 0 { *d = 0 }`: the
+                // conditional store compiled to a branch on the sign pattern, which
+                // mispredicts about half the time (7 % of a trained-state iteration;
+                // docs/performance.md, "v7").
                 for (d, &a) in dz.iter_mut().zip(&acts[l * n * w..][..n * w]) {
-                    if a <= 0.0 {
-                        *d = 0.0;
-                    }
+                    *d = if a <= 0.0 { 0.0 } else { *d };
                 }
             }
             let h_in = if l == 0 {

@@ -27,10 +27,22 @@ pub(crate) struct Bins {
     /// `order.len() + 1` prefix sums of the ranks' tile-rectangle areas: rank `r` owns
     /// the intersection slots `slot_start[r]..slot_start[r + 1]` (see `grad_slots`).
     pub slot_start: Vec<usize>,
+    /// What [`Bins::slot`] needs of each rank, in rank order: one load per (Gaussian,
+    /// tile) in the backward instead of a dependent chain through `order` and `rects`.
+    slot_geom: Vec<SlotGeom>,
     keys: Vec<u64>,
     /// Tile rectangle `[x0, x1, y0, y1)` of each Gaussian (by global index).
     pub rects: Vec<[u32; 4]>,
     cursor: Vec<usize>,
+}
+
+/// A rank's first slot and the corner and width of its tile rectangle.
+#[derive(Clone, Copy, Debug, Default)]
+struct SlotGeom {
+    start: usize,
+    x0: u32,
+    width: u32,
+    y0: u32,
 }
 
 /// Tile rectangle `[x0, x1, y0, y1)` of a projected Gaussian (empty when culled).
@@ -64,9 +76,8 @@ impl Bins {
     /// be inside its rectangle.
     #[inline]
     pub fn slot(&self, rank: usize, tx: usize, ty: usize) -> usize {
-        let [x0, x1, y0, _] = self.rects[self.order[rank] as usize];
-        let (x0, x1, y0) = (x0 as usize, x1 as usize, y0 as usize);
-        self.slot_start[rank] + (ty - y0) * (x1 - x0) + (tx - x0)
+        let g = self.slot_geom[rank];
+        g.start + (ty - g.y0 as usize) * g.width as usize + (tx - g.x0 as usize)
     }
 
     pub fn build(&mut self, proj: &[Projected], width: u32, height: u32) {
@@ -96,10 +107,17 @@ impl Bins {
         self.rank_of.resize(proj.len(), u32::MAX);
         self.slot_start.clear();
         self.slot_start.push(0);
+        self.slot_geom.clear();
         let mut slots = 0;
         for (rank, &gid) in self.order.iter().enumerate() {
             self.rank_of[gid as usize] = rank as u32;
             let [x0, x1, y0, y1] = self.rects[gid as usize];
+            self.slot_geom.push(SlotGeom {
+                start: slots,
+                x0,
+                width: x1 - x0,
+                y0,
+            });
             slots += (x1 - x0) as usize * (y1 - y0) as usize;
             self.slot_start.push(slots);
         }

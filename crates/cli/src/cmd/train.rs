@@ -277,6 +277,8 @@ pub fn run(a: Args) -> Result<()> {
             tracing::info!("checkpoint {}", dir.display());
         }
         if interrupted {
+            // A stopped segment's breakdown is as useful as a finished one's.
+            write_timings(&tr, &a.out, start.elapsed().as_secs_f64(), first)?;
             pb.abandon_with_message(format!("interrupted at {it}; continue with --resume"));
             return Ok(());
         }

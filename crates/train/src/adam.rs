@@ -40,7 +40,7 @@ impl Adam {
         grads: &[f32],
         hp: AdamHyper,
         row: usize,
-        lr_of: impl Fn(usize) -> f32 + Sync,
+        lr_of: impl Fn(usize) -> f32,
     ) {
         debug_assert_eq!(params.len(), grads.len());
         debug_assert_eq!(params.len(), self.m.len());

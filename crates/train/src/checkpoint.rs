@@ -10,6 +10,7 @@ use crate::error::{Result, TrainError};
 use crate::field::DeformField;
 use crate::io::{atomic_write, create_dir_all};
 use crate::model::{GaussianModel, ROWS};
+use crate::objects::{ObjectsView, RigidObject};
 use crate::state::{AuxRows, DensifyStats, GaussianState};
 use crate::trainer::Trainer;
 use rand::SeedableRng;
@@ -61,6 +62,10 @@ fn state_bytes(tr: &Trainer) -> Result<Vec<u8>> {
     for a in &st.aux {
         f(format!("aux.{}", a.name), vec![n, a.cols], &a.data);
     }
+    if let Some(node) = &tr.objects {
+        crate::objects::store::write_tensors(node, &mut f);
+    }
+    tensors.push(("object".into(), Dtype::U8, vec![n], st.object.clone()));
     let order: Vec<u8> = tr.order.iter().flat_map(|x| x.to_le_bytes()).collect();
     tensors.push((
         "epoch.order".into(),
@@ -94,6 +99,9 @@ fn state_bytes(tr: &Trainer) -> Result<Vec<u8>> {
     );
     let steps: Vec<String> = st.adam.iter().map(|a| a.step.to_string()).collect();
     meta.insert("adam.steps".to_string(), steps.join(","));
+    if let Some(node) = &tr.objects {
+        meta.insert("objects".to_string(), crate::objects::store::metadata(node));
+    }
     let views: Vec<(String, safetensors::tensor::TensorView)> = tensors
         .iter()
         .map(|(name, dt, shape, data)| {
@@ -304,8 +312,33 @@ pub fn read_config(dir: &Path) -> Result<TrainConfig> {
     TrainConfig::from_toml_file(&dir.join(CONFIG_NAME))
 }
 
-/// The model, field and iteration of a checkpoint (for render/eval/export).
-pub fn load_model(dir: &Path) -> Result<(TrainConfig, GaussianModel, DeformField, u32)> {
+/// What render, eval and export need of a checkpoint.
+pub struct LoadedModel {
+    pub cfg: TrainConfig,
+    pub model: GaussianModel,
+    pub field: DeformField,
+    pub iteration: u32,
+    /// The rigid objects (empty for runs without them) and the per-Gaussian object column.
+    pub objects: Vec<RigidObject>,
+    pub column: Vec<u8>,
+}
+
+impl LoadedModel {
+    pub fn objects_view(&self) -> ObjectsView<'_> {
+        ObjectsView {
+            objects: &self.objects,
+            column: &self.column,
+        }
+    }
+
+    /// Whether the field was past its warm-up at this checkpoint (before it, δ = 0).
+    pub fn field_active(&self) -> bool {
+        self.iteration >= self.cfg.field.warm_up
+    }
+}
+
+/// The model, field, objects and iteration of a checkpoint (for render/eval/export).
+pub fn load_model(dir: &Path) -> Result<LoadedModel> {
     let cfg = read_config(dir)?;
     let mut model = crate::ply::read(&dir.join(PLY_NAME))?;
     let path = dir.join(STATE_NAME);
@@ -318,7 +351,42 @@ pub fn load_model(dir: &Path) -> Result<(TrainConfig, GaussianModel, DeformField
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let mut field = DeformField::new(&cfg.field, &mut rng);
     field.mlp.params = sf.f32s("field.params", field.mlp.num_params())?;
-    Ok((cfg, model, field, sf.meta("iteration")?))
+    let column = read_column(&sf, model.len())?;
+    let stored = read_objects(&sf)?;
+    check_column(&sf, &column, &stored.objects)?;
+    Ok(LoadedModel {
+        cfg,
+        model,
+        field,
+        iteration: sf.meta("iteration")?,
+        objects: stored.objects,
+        column,
+    })
+}
+
+/// The per-Gaussian object column (absent in runs from before objects: all background).
+fn read_column(sf: &StateFile<'_>, n: usize) -> Result<Vec<u8>> {
+    if sf.st.tensor("object").is_err() {
+        return Ok(vec![crate::objects::NO_OBJECT; n]);
+    }
+    sf.bytes("object", Dtype::U8, n)
+}
+
+fn read_objects(sf: &StateFile<'_>) -> Result<crate::objects::store::Stored> {
+    let meta = sf.meta.get("objects").map(String::as_str);
+    crate::objects::store::read(meta, |name, len| sf.f32s(name, len), |p| sf.err(p))
+}
+
+/// Every object ID in the column names an object of the checkpoint.
+fn check_column(sf: &StateFile<'_>, column: &[u8], objects: &[RigidObject]) -> Result<()> {
+    let known = |id: u8| id == crate::objects::NO_OBJECT || objects.iter().any(|o| o.id == id);
+    match column.iter().position(|&id| !known(id)) {
+        Some(i) => Err(sf.err(format!(
+            "Gaussian {i} belongs to object {}, which the checkpoint does not describe",
+            column[i]
+        ))),
+        None => Ok(()),
+    }
 }
 
 fn parse_state<'a>(bytes: &'a [u8], path: &Path) -> Result<StateFile<'a>> {
@@ -343,7 +411,14 @@ fn parse_state<'a>(bytes: &'a [u8], path: &Path) -> Result<StateFile<'a>> {
 
 /// Rebuilds a trainer from a checkpoint folder so that training continues bit-identically.
 pub fn load_trainer(dir: &Path, dataset: scene::Dataset) -> Result<Trainer> {
-    let (cfg, model, field, iteration) = load_model(dir)?;
+    let LoadedModel {
+        cfg,
+        model,
+        field,
+        iteration,
+        column,
+        ..
+    } = load_model(dir)?;
     let path = dir.join(STATE_NAME);
     let bytes = crate::io::read(&path)?;
     let sf = parse_state(&bytes, &path)?;
@@ -379,7 +454,15 @@ pub fn load_trainer(dir: &Path, dataset: scene::Dataset) -> Result<Trainer> {
         max_radii: sf.f32s("stats.max_radii", n)?,
     };
     state.aux = read_aux(&sf, n)?;
+    state.object = column;
     tr.state = state;
+    tr.objects = crate::objects::RigidObjects::for_run(&tr.cfg, &tr.dataset)?;
+    if let Some(node) = tr.objects.as_mut() {
+        let stored = read_objects(&sf)?;
+        node.started = stored.started;
+        node.objects = stored.objects;
+        node.knot_adam = stored.knot_adam;
+    }
     // Checkpoints from before this key existed resume with the clock at zero.
     tr.train_seconds = sf.meta_or("train_seconds", 0.0f64)?;
     if !(tr.train_seconds.is_finite() && tr.train_seconds >= 0.0) {

@@ -26,6 +26,9 @@ pub struct TrainConfig {
     pub log: LogConfig,
     /// The SemDynReg regularizer (paper Sec. 3.3–3.4); off unless enabled here or by `--reg`.
     pub reg: crate::regularizer::RegConfig,
+    /// Rigid objects (our extension beyond the paper, docs/objects.md); off unless enabled
+    /// here or by `--objects`.
+    pub objects: crate::objects::ObjectsConfig,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -151,6 +154,7 @@ impl Default for TrainConfig {
                 enabled: false,
                 ..Default::default()
             },
+            objects: crate::objects::ObjectsConfig::default(),
         }
     }
 }
@@ -341,6 +345,7 @@ impl TrainConfig {
         c.log.log_interval = every(c.log.log_interval);
         c.reg.start_iter = at(c.reg.start_iter as u32) as u64;
         c.reg.end_iter = at(c.reg.end_iter as u32) as u64;
+        c.objects = self.objects.rescaled(self.iterations, iters);
         c.validate()?;
         Ok(c)
     }
@@ -461,6 +466,9 @@ impl TrainConfig {
         self.reg
             .validate()
             .map_err(|e| TrainError::config("reg", e.to_string()))?;
+        self.objects
+            .validate()
+            .map_err(|e| TrainError::config("objects", e))?;
         Ok(())
     }
 }

@@ -6,6 +6,7 @@ use crate::deform::{self, Deformed};
 use crate::error::{Result, TrainError};
 use crate::field::{DeformField, DeformOutput};
 use crate::model::GaussianModel;
+use crate::objects::ObjectsView;
 use serde::{Deserialize, Serialize};
 use splat::{Camera, Rasterizer, RenderOptions};
 
@@ -48,11 +49,13 @@ pub struct EvalReport {
 }
 
 impl Renderer {
-    /// Fills the deformed geometry at time `t` (δ = 0 when `field` is None).
+    /// Fills the deformed geometry at time `t` (δ = 0 when `field` is None), objects placed
+    /// by their trajectories.
     fn deform(
         &mut self,
         model: &GaussianModel,
         field: Option<&mut DeformField>,
+        objects: ObjectsView,
         cam: &Camera,
         t: f32,
     ) {
@@ -65,11 +68,13 @@ impl Renderer {
                     f.cfg.visible_margin,
                     &mut self.rows,
                 );
+                objects.keep_background_rows(&mut self.rows);
                 f.forward(&model.means, t, &self.rows, &mut self.delta);
                 deform::apply(model, Some(&self.delta), &mut self.deformed);
             }
             None => deform::apply(model, None, &mut self.deformed),
         }
+        objects.place(model, t, &mut self.deformed);
     }
 
     /// Renders `H·W·3` RGB at time `t` from `cam`.
@@ -77,11 +82,12 @@ impl Renderer {
         &mut self,
         model: &GaussianModel,
         field: Option<&mut DeformField>,
+        objects: ObjectsView,
         cam: &Camera,
         t: f32,
         background: [f32; 3],
     ) -> Result<Vec<f32>> {
-        self.deform(model, field, cam, t);
+        self.deform(model, field, objects, cam, t);
         let g = crate::trainer::gaussians(model, &self.deformed);
         let opts = RenderOptions {
             background,
@@ -95,6 +101,7 @@ impl Renderer {
         &mut self,
         model: &GaussianModel,
         mut field: Option<&mut DeformField>,
+        objects: ObjectsView,
         frames: &[scene::Frame],
         background: [f32; 3],
         mut lpips: Option<FrameScorer>,
@@ -102,7 +109,8 @@ impl Renderer {
         let mut out = Vec::with_capacity(frames.len());
         let mut ssim_ws = metrics::SsimWorkspace::new();
         for fr in frames {
-            let img = self.render(model, field.as_deref_mut(), &fr.camera, fr.time, background)?;
+            let f = field.as_deref_mut();
+            let img = self.render(model, f, objects, &fr.camera, fr.time, background)?;
             let gt = fr.image.to_f32();
             if gt.len() != img.len() {
                 return Err(TrainError::Data(format!(
@@ -141,23 +149,27 @@ impl Renderer {
 }
 
 /// The Gaussians deformed to time `t`, every one evaluated (no view), as a standard model:
-/// means + δx, quats normalize(q) + δr, log(exp(log_scale) + δs). Scales that δs drives
-/// to ≤ 0 are clamped to 1e-8 first (the rasterizer would square them; a log cannot).
+/// means + δx, quats normalize(q) + δr, log(exp(log_scale) + δs), and object Gaussians
+/// placed by their trajectories. Scales that δs drives to ≤ 0 are clamped to 1e-8 first
+/// (the rasterizer would square them; a log cannot).
 pub fn deformed_model(
     model: &GaussianModel,
     field: Option<&mut DeformField>,
+    objects: ObjectsView,
     t: f32,
 ) -> GaussianModel {
     let mut d = Deformed::default();
     let mut delta = DeformOutput::default();
     match field {
         Some(f) => {
-            let rows: Vec<u32> = (0..model.len() as u32).collect();
+            let mut rows: Vec<u32> = (0..model.len() as u32).collect();
+            objects.keep_background_rows(&mut rows);
             f.forward(&model.means, t, &rows, &mut delta);
             deform::apply(model, Some(&delta), &mut d);
         }
         None => deform::apply(model, None, &mut d),
     }
+    objects.place(model, t, &mut d);
     GaussianModel {
         means: d.means,
         quats: d.quats,

@@ -64,6 +64,10 @@ pub struct GaussianState {
     pub stats: DensifyStats,
     /// Hook-owned rows, by name (usually none).
     pub aux: Vec<AuxRows>,
+    /// The object each Gaussian belongs to (`objects::NO_OBJECT`: the deformable
+    /// background). Maintained through every row change, never by raw row indices: a clone
+    /// or split child belongs to its parent's object.
+    pub object: Vec<u8>,
 }
 
 /// The hook rows of a state, handed to [`crate::hook::DeformHook::apply`].
@@ -112,6 +116,7 @@ impl GaussianState {
             adam,
             stats: DensifyStats::zeros(n),
             aux: Vec::new(),
+            object: vec![crate::objects::NO_OBJECT; n],
         }
     }
 
@@ -136,6 +141,7 @@ impl GaussianState {
         for a in &mut self.aux {
             crate::model::retain_rows(&mut a.data, a.cols, keep);
         }
+        crate::model::retain_rows(&mut self.object, 1, keep);
     }
 
     /// Appends new Gaussians with zero moments and zero statistics; `parents[j]` is the row
@@ -150,6 +156,24 @@ impl GaussianState {
                 a.data.extend_from_within(p * c..(p + 1) * c);
             }
         }
+        let inherited: Vec<u8> = parents.iter().map(|&p| self.object[p]).collect();
+        self.object.extend(inherited);
+        self.append_rows(new);
+    }
+
+    /// Appends the Gaussians of a new object (`objects::start`): zero moments, statistics
+    /// and hook rows, `object` in the column.
+    pub fn append_object(&mut self, new: &GaussianModel, object: u8) {
+        let k = new.len();
+        for a in &mut self.aux {
+            a.data.resize(a.data.len() + k * a.cols, 0.0);
+        }
+        self.object.resize(self.object.len() + k, object);
+        self.append_rows(new);
+    }
+
+    fn append_rows(&mut self, new: &GaussianModel) {
+        let k = new.len();
         self.model.append(new);
         for (a, r) in self.adam.iter_mut().zip(ROWS) {
             a.append_zeros(k * r);
@@ -181,6 +205,6 @@ impl GaussianState {
         .iter()
         .all(|s| s.len() == n);
         let aux_ok = self.aux.iter().all(|a| a.data.len() == n * a.cols);
-        model_ok && adam_ok && stats_ok && aux_ok
+        model_ok && adam_ok && stats_ok && aux_ok && self.object.len() == n
     }
 }

@@ -22,9 +22,11 @@ pub enum Phase {
     FieldBackward,
     Optimizer,
     Densify,
+    /// The rigid objects' mask term (their objects-only renders).
+    Objects,
 }
 
-pub const PHASES: [Phase; 11] = [
+pub const PHASES: [Phase; 12] = [
     Phase::FieldForward,
     Phase::Deform,
     Phase::Projection,
@@ -36,6 +38,7 @@ pub const PHASES: [Phase; 11] = [
     Phase::FieldBackward,
     Phase::Optimizer,
     Phase::Densify,
+    Phase::Objects,
 ];
 
 impl Phase {
@@ -52,6 +55,7 @@ impl Phase {
             Phase::FieldBackward => "field_backward",
             Phase::Optimizer => "optimizer",
             Phase::Densify => "densify",
+            Phase::Objects => "objects",
         }
     }
 }
@@ -59,7 +63,7 @@ impl Phase {
 /// Seconds per phase and the number of iterations they cover.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StepTimings {
-    pub seconds: [f64; 11],
+    pub seconds: [f64; PHASES.len()],
     pub iterations: u64,
 }
 

@@ -24,7 +24,7 @@ use splat::{Colors, Gaussians, Gradients, Rasterizer, RenderOptions};
 pub struct StepStats {
     pub iteration: u32,
     pub loss: LossValue,
-    /// Extra loss returned by the hook (0 without one).
+    /// Extra loss returned by the hook and the rigid objects' mask term (0 without them).
     pub extra_loss: f32,
     pub psnr: f64,
     pub num_gaussians: usize,
@@ -50,6 +50,8 @@ pub struct Trainer {
     /// Wall-clock seconds spent training so far, over all resumed segments (the driver
     /// updates it; checkpoints keep it).
     pub train_seconds: f64,
+    /// The rigid objects (`[objects] enabled`): None for the baseline and the paper's runs.
+    pub objects: Option<crate::objects::RigidObjects>,
     ws: Workspace,
 }
 
@@ -98,7 +100,9 @@ impl Trainer {
         };
         let field = DeformField::new(&cfg.field, &mut rng);
         let extent = dataset.scene_extent();
-        Ok(Self::assemble(cfg, dataset, model, field, rng, extent))
+        let mut tr = Self::assemble(cfg, dataset, model, field, rng, extent);
+        tr.objects = crate::objects::RigidObjects::for_run(&tr.cfg, &tr.dataset)?;
+        Ok(tr)
     }
 
     pub(crate) fn assemble(
@@ -123,6 +127,7 @@ impl Trainer {
             extent,
             timings: StepTimings::default(),
             train_seconds: 0.0,
+            objects: None,
             ws: Workspace::default(),
         }
     }
@@ -151,14 +156,27 @@ impl Trainer {
         } else {
             max_frames.min(frames.len())
         };
+        let objects = match &self.objects {
+            Some(o) => o.view(&self.state.object),
+            None => crate::objects::ObjectsView::none(),
+        };
         let mut r = crate::render::Renderer::default();
         r.evaluate(
             &self.state.model,
             active.then_some(&mut self.field),
+            objects,
             &frames[..k],
             self.dataset.background,
             None,
         )
+    }
+
+    /// The objects and the object column, for rendering (none for baseline runs).
+    pub fn objects_view(&self) -> crate::objects::ObjectsView<'_> {
+        match &self.objects {
+            Some(o) => o.view(&self.state.object),
+            None => crate::objects::ObjectsView::none(),
+        }
     }
 
     /// Next training frame: a fresh random permutation each epoch (3DGS `viewpoint_stack`).
@@ -186,9 +204,11 @@ impl Trainer {
         {
             self.state.model.sh_degree += 1;
         }
+        self.start_objects(it)?;
         let fi = self.next_frame();
         let active = self.field_active_at(it);
-        let topk = hook.as_ref().map_or(0, |h| h.topk(it));
+        let hook_k = hook.as_ref().map_or(0, |h| h.topk(it));
+        let topk = hook_k.max(self.objects.as_ref().map_or(0, |o| o.topk()));
         self.forward_deform(fi, active, &mut tm);
         let (loss, psnr, extra_loss) =
             self.render_and_loss(fi, it, active, topk, &mut hook, &mut tm)?;
@@ -198,14 +218,14 @@ impl Trainer {
                 what: "loss".into(),
             });
         }
-        self.backward(fi, active, &mut tm)?;
-        let densify = self.optimize_and_densify(it, active, &mut tm);
+        let objects_loss = self.backward(fi, active, &mut tm)?;
+        let densify = self.optimize_and_densify(it, fi, active, &mut tm);
         self.iteration = it;
         self.timings.add(&tm);
         Ok(StepStats {
             iteration: it,
             loss,
-            extra_loss,
+            extra_loss: extra_loss + objects_loss,
             psnr,
             num_gaussians: self.state.len(),
             field_active: active,
@@ -213,9 +233,39 @@ impl Trainer {
         })
     }
 
+    /// The rigid objects' milestones: brought in at their start iteration
+    /// (`objects::start`), their occlusion gauge applied again at `rescale_at`.
+    fn start_objects(&mut self, it: u32) -> Result<()> {
+        let Some(node) = self.objects.as_mut() else {
+            return Ok(());
+        };
+        let t0 = std::time::Instant::now();
+        if !node.started && it >= node.cfg.start_iter {
+            crate::objects::start::start(node, &mut self.state, &self.dataset, &mut self.rng)?;
+            let seconds = t0.elapsed().as_secs_f64();
+            tracing::info!(iteration = it, seconds, "rigid objects started");
+        } else if node.started && node.cfg.rescale_at.contains(&it) {
+            let field = (it >= self.cfg.field.warm_up).then_some(&mut self.field);
+            let applied =
+                crate::objects::regauge::regauge(node, &mut self.state, field, &self.dataset)?;
+            let seconds = t0.elapsed().as_secs_f64();
+            tracing::info!(
+                iteration = it,
+                seconds,
+                ?applied,
+                "occlusion gauge applied again"
+            );
+        }
+        Ok(())
+    }
+
     fn forward_deform(&mut self, fi: usize, active: bool, tm: &mut StepTimings) {
         let ws = &mut self.ws;
         let model = &self.state.model;
+        let objects = match &self.objects {
+            Some(o) => o.view(&self.state.object),
+            None => crate::objects::ObjectsView::none(),
+        };
         if active {
             let t0 = std::time::Instant::now();
             let frame = &self.dataset.train[fi];
@@ -227,12 +277,17 @@ impl Trainer {
                 fc.visible_margin,
                 &mut ws.rows,
             );
+            objects.keep_background_rows(&mut ws.rows);
             self.field
                 .forward(&model.means, frame.time, &ws.rows, &mut ws.delta);
             tm.record(Phase::FieldForward, t0);
         }
         let t0 = std::time::Instant::now();
         deform::apply(model, active.then_some(&ws.delta), &mut ws.deformed);
+        if let Some(node) = self.objects.as_mut() {
+            let t = self.dataset.train[fi].time;
+            node.place(model, &self.state.object, t, &mut ws.deformed);
+        }
         tm.record(Phase::Deform, t0);
     }
 
@@ -277,6 +332,9 @@ impl Trainer {
             self.cfg.loss.lambda_dssim,
             &mut ws.dl_dimage,
         );
+        if let Some(node) = &self.objects {
+            node.mask_background(it, fi, &mut ws.dl_dimage);
+        }
         let psnr = metrics::psnr(out.image, &ws.gt);
         ws.radii.clear();
         ws.radii.extend_from_slice(out.radii);
@@ -284,6 +342,10 @@ impl Trainer {
         tm.record(Phase::Loss, t0);
         ws.extra.reset(model.len());
         let mut aux = crate::state::AuxStore::new(&mut self.state.aux, model.len());
+        if let Some(node) = &self.objects {
+            node.record_votes(fi, out.topk_ids, out.topk_weights, topk, &mut aux)
+                .map_err(TrainError::Hook)?;
+        }
         let mut extra_loss = 0.0;
         if let Some(h) = hook.as_mut() {
             let t0 = std::time::Instant::now();
@@ -310,7 +372,9 @@ impl Trainer {
         Ok((loss, psnr, extra_loss))
     }
 
-    fn backward(&mut self, fi: usize, active: bool, tm: &mut StepTimings) -> Result<()> {
+    /// Rasterizer backward, the objects' mask term and chain, the field backward; returns
+    /// the objects' mask loss.
+    fn backward(&mut self, fi: usize, active: bool, tm: &mut StepTimings) -> Result<f32> {
         let opts = self.render_options(0);
         let ws = &mut self.ws;
         let model = &self.state.model;
@@ -322,6 +386,13 @@ impl Trainer {
         tm.record(Phase::RasterBackward, t0);
         let projection = ws.raster.timings().project;
         tm.move_seconds(Phase::RasterBackward, Phase::ProjectionBackward, projection);
+        let mut objects_loss = 0.0;
+        if let Some(node) = self.objects.as_mut().filter(|n| n.started) {
+            let t0 = std::time::Instant::now();
+            let cam = &frame.camera;
+            objects_loss = node.add_mask_loss(fi, cam, model, &ws.deformed, &mut ws.grads)?;
+            tm.record(Phase::Objects, t0);
+        }
         let t0 = std::time::Instant::now();
         deform::backward(
             model,
@@ -330,6 +401,9 @@ impl Trainer {
             &ws.grads.scales,
             &mut ws.canon,
         );
+        if let Some(node) = self.objects.as_mut() {
+            node.backward(model, &ws.grads.means, &ws.grads.quats, &mut ws.canon);
+        }
         tm.record(Phase::Deform, t0);
         if active {
             let t0 = std::time::Instant::now();
@@ -344,7 +418,7 @@ impl Trainer {
             self.field.backward(&ws.extra, &mut ws.field_grad);
             tm.record(Phase::FieldBackward, t0);
         }
-        Ok(())
+        Ok(objects_loss)
     }
 
     /// Adam on the field and Gaussians, then density control (3DGS `train.py` order). On
@@ -353,6 +427,7 @@ impl Trainer {
     fn optimize_and_densify(
         &mut self,
         it: u32,
+        frame: usize,
         active: bool,
         tm: &mut StepTimings,
     ) -> Option<DensifyReport> {
@@ -377,6 +452,9 @@ impl Trainer {
         if !densify_now {
             self.adam_gaussians(it, hp, !reset_now);
         }
+        if let Some(node) = self.objects.as_mut() {
+            node.step(hp);
+        }
         tm.record(Phase::Optimizer, t0);
         let t0 = std::time::Instant::now();
         let mut report = None;
@@ -386,6 +464,15 @@ impl Trainer {
                 .stats
                 .add(&self.ws.radii, &self.ws.grads.means2d, w, h);
             if densify_now {
+                if let Some(node) = &self.objects {
+                    let at = crate::objects::membership::StepPlacement {
+                        deformed: &self.ws.deformed,
+                        background_rows: active.then_some(self.ws.rows.as_slice()),
+                        time: self.dataset.train[frame].time,
+                    };
+                    let moved = node.transfer(&mut self.state, &at);
+                    tracing::debug!(iteration = it, moved, "object membership transfers");
+                }
                 let prune_screen = it > d.screen_size_after;
                 report = Some(densify::densify_and_prune(
                     &mut self.state,

@@ -13,6 +13,7 @@ fn train_psnr(tr: &mut Trainer) -> f64 {
     r.evaluate(
         &tr.state.model,
         active.then_some(&mut tr.field),
+        train::objects::ObjectsView::none(),
         &frames,
         bg,
         None,

@@ -133,7 +133,7 @@ fn train_both(args: &Args) -> Result<Runs> {
 /// The resolved config of a run's latest checkpoint, as JSON.
 fn run_config(run: &Path) -> Result<serde_json::Value> {
     let ckpt = train::checkpoint::latest(run)?;
-    let (cfg, ..) = train::checkpoint::load_model(&ckpt)
+    let cfg = train::checkpoint::read_config(&ckpt)
         .with_context(|| format!("reading {}", ckpt.display()))?;
     serde_json::to_value(&cfg).context("serializing the training config")
 }

@@ -62,7 +62,12 @@ pub fn run(a: Args) -> Result<()> {
     }
     for t in &times {
         let active = r.iteration >= r.cfg.field.warm_up;
-        let m = train::render::deformed_model(&r.model, active.then_some(&mut r.field), *t);
+        let objects = train::objects::ObjectsView {
+            objects: &r.objects,
+            column: &r.column,
+        };
+        let m =
+            train::render::deformed_model(&r.model, active.then_some(&mut r.field), objects, *t);
         let path = if single {
             a.out.clone()
         } else {

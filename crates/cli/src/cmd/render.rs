@@ -42,6 +42,9 @@ pub struct LoadedRun {
     pub model: GaussianModel,
     pub field: DeformField,
     pub iteration: u32,
+    /// Rigid objects (empty for runs without them) and the per-Gaussian object column.
+    pub objects: Vec<train::objects::RigidObject>,
+    pub column: Vec<u8>,
     pub dataset: scene::Dataset,
     pub renderer: Renderer,
 }
@@ -50,16 +53,18 @@ impl LoadedRun {
     pub fn open(run: &Path, iteration: Option<u32>) -> Result<Self> {
         let info = train::run::RunInfo::load(run)?;
         let dir = checkpoint::select(run, iteration)?;
-        let (cfg, model, field, iteration) =
+        let m =
             checkpoint::load_model(&dir).with_context(|| format!("loading {}", dir.display()))?;
         let dataset = info
             .dataset()
             .with_context(|| format!("loading {}", info.scene.display()))?;
         Ok(Self {
-            cfg,
-            model,
-            field,
-            iteration,
+            cfg: m.cfg,
+            model: m.model,
+            field: m.field,
+            iteration: m.iteration,
+            objects: m.objects,
+            column: m.column,
             dataset,
             renderer: Renderer::default(),
         })
@@ -81,9 +86,14 @@ impl LoadedRun {
     ) -> Result<EvalReport> {
         let bg = self.dataset.background;
         let active = self.iteration >= self.cfg.field.warm_up;
+        let objects = train::objects::ObjectsView {
+            objects: &self.objects,
+            column: &self.column,
+        };
         Ok(self.renderer.evaluate(
             &self.model,
             active.then_some(&mut self.field),
+            objects,
             frames,
             bg,
             lpips,
@@ -115,9 +125,14 @@ pub fn run(a: Args) -> Result<()> {
     for (i, fr) in frames.iter().enumerate() {
         let t = a.time.unwrap_or(fr.time);
         let active = r.iteration >= r.cfg.field.warm_up;
+        let objects = train::objects::ObjectsView {
+            objects: &r.objects,
+            column: &r.column,
+        };
+        let field = active.then_some(&mut r.field);
         let img = r
             .renderer
-            .render(&r.model, active.then_some(&mut r.field), &fr.camera, t, bg)?;
+            .render(&r.model, field, objects, &fr.camera, t, bg)?;
         let png = scene::ImageU8::from_f32(fr.camera.width, fr.camera.height, &img);
         let name = match a.time {
             Some(t) => format!("{}_t{t:.3}.png", frame_stem(&fr.file_path, i)),

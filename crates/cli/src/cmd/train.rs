@@ -49,6 +49,15 @@ pub struct Args {
     /// Train the baseline without the regularizer (the default unless the config enables it).
     #[arg(long)]
     pub no_reg: bool,
+    /// Rigid objects (beyond the paper; docs/objects.md): every object of the ID maps
+    /// (`SCENE/semantics/`, made by `semdynreg segment`) becomes a rigid body with its own
+    /// trajectory, found from its masks; the rest keeps the deformation field. Overrides
+    /// `objects.enabled` of the config.
+    #[arg(long, conflicts_with = "no_objects")]
+    pub objects: bool,
+    /// Train without rigid objects (the default unless the config enables them).
+    #[arg(long)]
+    pub no_objects: bool,
     /// Start from run FROM's checkpoint just before the regularizer's start instead of from
     /// scratch: exact, since both runs are the same until then. The scene, seed, downscale
     /// and background are FROM's; --config/--iters/--reg must give FROM's config except in
@@ -62,6 +71,9 @@ fn new_config(a: &Args) -> Result<TrainConfig> {
     let mut cfg = TrainConfig::for_run(a.config.as_deref(), a.iters)?;
     if a.reg || a.no_reg {
         cfg.reg.enabled = a.reg;
+    }
+    if a.objects || a.no_objects {
+        cfg.objects.enabled = a.objects;
     }
     Ok(cfg)
 }
@@ -108,9 +120,9 @@ fn fresh(a: &Args) -> Result<Trainer> {
 }
 
 fn resumed(a: &Args) -> Result<Trainer> {
-    if a.config.is_some() || a.iters.is_some() || a.reg || a.no_reg {
+    if a.config.is_some() || a.iters.is_some() || a.reg || a.no_reg || a.objects || a.no_objects {
         bail!(
-            "--resume continues with the run's saved config; drop --config/--iters/--reg/--no-reg"
+            "--resume continues with the run's saved config; drop --config/--iters/--reg/--no-reg/--objects"
         );
     }
     let info = RunInfo::load(&a.out)?;

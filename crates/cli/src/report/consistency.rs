@@ -11,6 +11,7 @@ use scene::objects::ObjectsFile;
 use scene::Frame;
 use splat::{Colors, Gaussians, Rasterizer, RenderOptions};
 use std::path::Path;
+use train::checkpoint::LoadedModel;
 use train::model::{GaussianModel, SH_COEFFS};
 use train::regularizer::{
     ConsistencyAccumulator, ConsistencyReport, ObjectGroups, ObjectTrack, RegConfig, TopKView,
@@ -46,9 +47,10 @@ fn render_topk(
     Ok(raster.forward(&g, &frame.camera, &opts)?.topk_ids.to_vec())
 }
 
-/// Deformed Gaussians at `t` (canonical ones while the field is still in warm-up).
-fn at_time(model: &GaussianModel, field: &mut Option<DeformField>, t: f32) -> GaussianModel {
-    deformed_model(model, field.as_mut(), t)
+/// Deformed Gaussians at `t` (canonical ones while the field is still in warm-up), rigid
+/// objects placed by their trajectories.
+fn at_time(m: &LoadedModel, field: &mut Option<DeformField>, t: f32) -> GaussianModel {
+    deformed_model(&m.model, field.as_mut(), m.objects_view(), t)
 }
 
 /// The metric for the latest checkpoint of `run` (or iteration's), over its scene's test
@@ -61,9 +63,9 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<Consistency
     let objects_path = info.scene.join("objects.json");
     let objects = ObjectsFile::load(&objects_path)?;
     let dir = checkpoint::select(run, iteration)?;
-    let (cfg, model, field, at) =
+    let loaded =
         checkpoint::load_model(&dir).with_context(|| format!("loading {}", dir.display()))?;
-    let mut field = (at >= cfg.field.warm_up).then_some(field);
+    let mut field = loaded.field_active().then(|| loaded.field.clone());
     let mut test: Vec<&Frame> = ds.test.iter().collect();
     test.sort_by(|a, b| a.time.total_cmp(&b.time));
     let Some(reference) = test.first().copied() else {
@@ -71,7 +73,7 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<Consistency
     };
     let mask = scene::load_mask(&ds.gt_mask_path(reference))?;
     let k = RegConfig::default().k;
-    let anchor = at_time(&model, &mut field, reference.time);
+    let anchor = at_time(&loaded, &mut field, reference.time);
     let ids = render_topk(&anchor, reference, ds.background, k)?;
     let mut groups = ObjectGroups::new();
     groups.build(
@@ -81,7 +83,7 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<Consistency
         },
         k,
         &mask.data,
-        model.len(),
+        loaded.model.len(),
     )?;
     let pose = |f: &Frame| {
         objects.frame(&f.file_path).with_context(|| {
@@ -96,7 +98,7 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<Consistency
     let mut acc = ConsistencyAccumulator::new();
     for f in &test {
         let pose_t = pose(f)?;
-        let deformed = at_time(&model, &mut field, f.time);
+        let deformed = at_time(&loaded, &mut field, f.time);
         let mut tracks = Vec::new();
         for g in groups.iter() {
             let Some(i) = objects.objects.iter().position(|o| o.id == g.object) else {

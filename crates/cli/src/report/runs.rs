@@ -50,8 +50,8 @@ pub fn run_state(dir: &Path) -> Result<RunState> {
             dir.display()
         )
     })?;
-    let (cfg, _, _, iteration) =
-        checkpoint::load_model(&ckpt).with_context(|| format!("reading {}", ckpt.display()))?;
+    let m = checkpoint::load_model(&ckpt).with_context(|| format!("reading {}", ckpt.display()))?;
+    let (cfg, iteration) = (m.cfg, m.iteration);
     Ok(if iteration >= cfg.iterations {
         RunState::Finished
     } else {

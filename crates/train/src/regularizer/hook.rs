@@ -27,20 +27,7 @@ impl SemanticHook {
     pub fn load(cfg: RegConfig, dataset: &Dataset) -> Result<Self> {
         let mut reg =
             Regularizer::new(cfg).map_err(|e| TrainError::config("reg", e.to_string()))?;
-        let mut id_maps = Vec::with_capacity(dataset.train.len());
-        for frame in &dataset.train {
-            let path = dataset.semantics_path(frame);
-            if !path.is_file() {
-                return Err(TrainError::Data(format!(
-                    "object-ID map {} is missing: run `semdynreg segment {}` first (or train with --no-reg)",
-                    path.display(),
-                    dataset.root.display()
-                )));
-            }
-            let mask = scene::load_mask(&path).map_err(|e| TrainError::Data(e.to_string()))?;
-            let (w, h) = (frame.image.width, frame.image.height);
-            id_maps.push(resample_nearest(&mask.data, mask.width, mask.height, w, h));
-        }
+        let id_maps = crate::id_maps::load(dataset)?;
         reg.set_objects(id_maps.iter().map(Vec::as_slice));
         Ok(Self {
             reg,
@@ -62,22 +49,6 @@ impl SemanticHook {
     pub fn active_at(&self, iteration: u32) -> bool {
         self.reg.active_at(iteration as u64)
     }
-}
-
-/// Nearest-neighbour resampling of an 8-bit label map (labels must not be blended).
-fn resample_nearest(src: &[u8], sw: u32, sh: u32, dw: u32, dh: u32) -> Vec<u8> {
-    if (sw, sh) == (dw, dh) {
-        return src.to_vec();
-    }
-    let mut out = Vec::with_capacity((dw * dh) as usize);
-    for i in 0..dh {
-        let si = (((i as f32 + 0.5) * sh as f32 / dh as f32) as u32).min(sh - 1);
-        for j in 0..dw {
-            let sj = (((j as f32 + 0.5) * sw as f32 / dw as f32) as u32).min(sw - 1);
-            out.push(src[(si * sw + sj) as usize]);
-        }
-    }
-    out
 }
 
 impl DeformHook for SemanticHook {
@@ -123,24 +94,5 @@ impl DeformHook for SemanticHook {
         };
         self.last = self.reg.apply(topk, id_map, deform, &mut grad, persist)?;
         Ok(self.last.weighted)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn nearest_resampling_keeps_labels() {
-        // 2×2 → 4×4: every label is replicated, none is invented.
-        let src = [0u8, 1, 2, 255];
-        let out = resample_nearest(&src, 2, 2, 4, 4);
-        assert_eq!(out[0], 0);
-        assert_eq!(out[3], 1);
-        assert_eq!(out[12], 2);
-        assert_eq!(out[15], 255);
-        assert!(out.iter().all(|v| src.contains(v)));
-        // Same size is a copy.
-        assert_eq!(resample_nearest(&src, 2, 2, 2, 2), src.to_vec());
     }
 }

@@ -53,6 +53,11 @@ impl MembershipVotes {
         }
     }
 
+    /// The object ID of each vote column but the last (the background's), ascending.
+    pub fn ids(&self) -> &[u8] {
+        &self.ids
+    }
+
     /// Values per Gaussian in the votes: one per object plus the background.
     pub fn cols(&self) -> usize {
         self.ids.len() + 1

@@ -1,0 +1,179 @@
+//! `[objects]`: every constant of the rigid-object mode (docs/objects.md). Off by default:
+//! the baseline and the paper's SemDynReg are unchanged unless `enabled` (`train --objects`).
+
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ObjectsConfig {
+    /// Turn each object of the ID maps into a rigid body with its own trajectory.
+    pub enabled: bool,
+    /// Iteration (1-based, of a 40k schedule; rescaled with `--iters`) at which objects are
+    /// lifted from their masks and tracked: the end of the field's warm-up, when the static
+    /// background is sharp enough to read depth from. Before it, object pixels do not
+    /// reach the photometric gradient, so the background does not learn the objects.
+    pub start_iter: u32,
+    /// A mask smaller than this many pixels (at the training resolution) is not a sighting.
+    pub min_pixels: u32,
+    /// Gaussians lifted from the reference mask of each object (at most).
+    pub lift_points: usize,
+    /// Depth spread of the lifted points, as a fraction of the mask's width in world units at
+    /// the estimated depth (0 = a flat layer facing the camera). One view cannot tell how
+    /// deep an object is, and a wrong guess makes the tracked distance drift (docs/objects.md),
+    /// so a moving object is tracked from each of these and the fit with the lowest loss over
+    /// all its views is kept; the first also decides whether the object is static.
+    pub lift_thickness: Vec<f32>,
+    /// Width in pixels of the band around a mask where the background's depth is read.
+    pub ring_px: u32,
+    /// An object whose mask-lifted track moves less than this fraction of its own size (and
+    /// turns less than `static_angle_deg`) is static: one fixed pose.
+    pub static_motion: f32,
+    pub static_angle_deg: f32,
+    /// Tracking (time-progressive fitting): iterations of pose fitting per new frame, and of
+    /// shape/appearance refinement on already tracked frames after each new frame.
+    pub track_pose_iters: u32,
+    pub track_shape_iters: u32,
+    /// Iterations of joint refinement of shape, appearance and all poses after the last view,
+    /// and again after each of `contact_rounds` corrections of its distance by contact.
+    pub track_refine_iters: u32,
+    pub contact_rounds: u32,
+    /// Weight of the spring that holds each view's distance to the camera at its contact
+    /// target while refining (`contact.rs`).
+    pub contact_weight: f32,
+    /// Learning rates while tracking: pose translation (world units), pose quaternion, and
+    /// the object's Gaussians' means (world units), colours, opacity logits, log-scales.
+    pub track_lr_translation: f32,
+    pub track_lr_rotation: f32,
+    pub track_lr_means: f32,
+    pub track_lr_colors: f32,
+    pub track_lr_opacity: f32,
+    pub track_lr_scales: f32,
+    /// Weight of the mask term (object alpha against the object's mask, balanced inside and
+    /// outside) against the colour term, while tracking and in training.
+    pub lambda_mask: f32,
+    /// Training: Adam rates of the trajectory knots (translation in world units per step,
+    /// quaternion components per step).
+    pub lr_translation: f32,
+    pub lr_rotation: f32,
+    /// Occlusion gauge: the quantile of (background depth / object depth) over the object's
+    /// pixels that is set to 1, i.e. objects are placed as far away as the static scene in
+    /// front of which they are seen allows (0 disables). Monocular video fixes a moving
+    /// object's size and distance only up to one common factor; this fixes the factor.
+    pub scale_quantile: f32,
+    /// Iterations (of a 40k schedule) at which the gauge is applied again during training.
+    pub rescale_at: Vec<u32>,
+    /// Membership from persistent top-k votes (`membership.rs`): at each densification, a
+    /// Gaussian whose votes put `transfer_share` of their weight (and `transfer_min_weight`)
+    /// on one object joins it. `votes_k` top-k entries per pixel vote.
+    pub transfer: bool,
+    pub transfer_share: f32,
+    pub transfer_min_weight: f32,
+    pub votes_k: usize,
+}
+
+impl Default for ObjectsConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            start_iter: 3000,
+            min_pixels: 20,
+            lift_points: 3000,
+            lift_thickness: vec![0.25, 0.1, 0.5],
+            ring_px: 3,
+            static_motion: 0.25,
+            static_angle_deg: 10.0,
+            track_pose_iters: 30,
+            track_shape_iters: 10,
+            track_refine_iters: 1000,
+            contact_rounds: 0,
+            contact_weight: 30.0,
+            track_lr_translation: 2e-3,
+            track_lr_rotation: 5e-3,
+            track_lr_means: 1e-3,
+            track_lr_colors: 1e-2,
+            track_lr_opacity: 5e-2,
+            track_lr_scales: 5e-3,
+            lambda_mask: 0.5,
+            lr_translation: 2e-4,
+            lr_rotation: 5e-4,
+            scale_quantile: 0.03,
+            rescale_at: Vec::new(),
+            transfer: true,
+            transfer_share: 0.6,
+            transfer_min_weight: 1.0,
+            votes_k: 3,
+        }
+    }
+}
+
+impl ObjectsConfig {
+    /// The schedule's milestones rescaled from `from` to `to` iterations.
+    pub fn rescaled(&self, from: u32, to: u32) -> Self {
+        let at = |v: u32| (v as f64 * to as f64 / from as f64).round() as u32;
+        Self {
+            start_iter: at(self.start_iter),
+            rescale_at: self.rescale_at.iter().map(|&v| at(v)).collect(),
+            ..self.clone()
+        }
+    }
+
+    /// Rejects values that would make the mode meaningless, naming the key.
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = [
+            ("objects.lift_points", self.lift_points as f32),
+            ("objects.track_lr_translation", self.track_lr_translation),
+            ("objects.track_lr_rotation", self.track_lr_rotation),
+            ("objects.lr_translation", self.lr_translation),
+            ("objects.lr_rotation", self.lr_rotation),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} must be finite and > 0, got {v}"));
+            }
+        }
+        let non_negative = [
+            ("objects.static_motion", self.static_motion),
+            ("objects.static_angle_deg", self.static_angle_deg),
+            ("objects.track_lr_means", self.track_lr_means),
+            ("objects.track_lr_colors", self.track_lr_colors),
+            ("objects.track_lr_opacity", self.track_lr_opacity),
+            ("objects.track_lr_scales", self.track_lr_scales),
+            ("objects.lambda_mask", self.lambda_mask),
+        ];
+        for (name, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{name} must be finite and ≥ 0, got {v}"));
+            }
+        }
+        if self.lift_thickness.is_empty()
+            || self
+                .lift_thickness
+                .iter()
+                .any(|t| !(t.is_finite() && *t >= 0.0))
+        {
+            return Err("objects.lift_thickness must list at least one finite value ≥ 0".into());
+        }
+        if !(0.0..0.5).contains(&self.scale_quantile) {
+            return Err(format!(
+                "objects.scale_quantile must be in [0, 0.5), got {}",
+                self.scale_quantile
+            ));
+        }
+        if !(self.transfer_share > 0.5 && self.transfer_share <= 1.0) {
+            return Err(format!(
+                "objects.transfer_share must be in (0.5, 1] (a majority), got {}",
+                self.transfer_share
+            ));
+        }
+        if !(1..=crate::regularizer::config::MAX_TOPK).contains(&self.votes_k) {
+            return Err(format!(
+                "objects.votes_k must be in 1..=32, got {}",
+                self.votes_k
+            ));
+        }
+        if self.start_iter == 0 {
+            return Err("objects.start_iter must be ≥ 1".into());
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,310 @@
+//! Rigid objects: our extension beyond the paper (docs/objects.md). Each object of the
+//! object-ID maps becomes a node of the scene with a trajectory `T_o(t) ∈ SE(3)`; its
+//! Gaussians are stored in the object's frame and placed by `T_o(t)`, with no time-varying
+//! scale or opacity, so an object cannot be drawn as a flip-book. Everything else keeps the
+//! Deformable-3DGS field. drivestudio's rigid nodes are organised the same way (a per-Gaussian
+//! object column, a pose table per object, one rasterizer call for all nodes).
+//!
+//! Pieces, in the order a run meets them:
+//! - [`config`]: `[objects]` of the training config;
+//! - before `start_iter`, object pixels are kept out of the photometric gradient
+//!   ([`RigidObjects::mask_background`]), so the static background does not learn them;
+//! - at `start_iter`, [`start`]: the background's depth is rendered in every training view,
+//!   each object is lifted from its first sighting ([`lift`]), tested for motion on its
+//!   mask-lifted track, tracked through its views in time order ([`track`]), and placed
+//!   by the occlusion gauge ([`gauge`]); its Gaussians join the training state with their
+//!   object in the state's object column;
+//! - every step: [`place`] puts object Gaussians in the world at the view's time and chains
+//!   the gradients back, [`mask_loss`] adds the alpha-against-mask term, [`knots`] steps
+//!   the trajectories;
+//! - densification keeps the column aligned (children inherit their parent's object).
+
+pub mod config;
+pub mod contact;
+pub mod gauge;
+pub mod knots;
+pub mod lift;
+pub mod mask_loss;
+pub mod membership;
+pub mod place;
+pub mod regauge;
+pub mod start;
+pub mod store;
+pub mod track;
+pub mod trajectory;
+
+pub use config::ObjectsConfig;
+pub use place::NO_OBJECT;
+pub use trajectory::{Pose, Trajectory};
+
+use crate::adam::AdamHyper;
+use crate::deform::{CanonicalGrads, Deformed};
+use crate::model::GaussianModel;
+use knots::KnotAdam;
+use trajectory::TrajectoryGrad;
+
+/// One rigid object: its ID in the object-ID maps, a name, and its trajectory. A static
+/// object keeps one pose and gets no pose gradient.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RigidObject {
+    pub id: u8,
+    pub name: String,
+    pub is_static: bool,
+    pub trajectory: Trajectory,
+}
+
+impl RigidObject {
+    pub fn new(id: u8, name: String, trajectory: Trajectory, is_static: bool) -> Self {
+        Self {
+            id,
+            name,
+            is_static,
+            trajectory,
+        }
+    }
+}
+
+/// The objects of a trained model and the per-Gaussian object column (`NO_OBJECT` for the
+/// deformable background), as render, eval and export need them.
+#[derive(Clone, Copy, Debug)]
+pub struct ObjectsView<'a> {
+    pub objects: &'a [RigidObject],
+    pub column: &'a [u8],
+}
+
+impl<'a> ObjectsView<'a> {
+    /// No objects: every Gaussian is background (the baseline and the paper's runs).
+    pub fn none() -> Self {
+        Self {
+            objects: &[],
+            column: &[],
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.objects.is_empty()
+    }
+
+    /// Drops object rows from the rows the deformation field is evaluated on.
+    pub fn keep_background_rows(&self, rows: &mut Vec<u32>) {
+        if !self.is_empty() {
+            rows.retain(|&r| self.column[r as usize] == NO_OBJECT);
+        }
+    }
+
+    /// Places the object rows of `out` (filled by `deform::apply`) at time `t`.
+    pub fn place(&self, model: &GaussianModel, t: f32, out: &mut Deformed) {
+        if self.is_empty() {
+            return;
+        }
+        let mut rows = Vec::new();
+        place::rows_by_object(self.objects, self.column, &mut rows);
+        place::place(self.objects, &rows, model, t, out, &mut Vec::new());
+    }
+}
+
+/// The rigid-object node of a training run: config, the training views' ID maps, the
+/// objects (empty before `start_iter`), their knot optimizers and reused buffers.
+pub struct RigidObjects {
+    pub cfg: ObjectsConfig,
+    pub objects: Vec<RigidObject>,
+    pub knot_adam: Vec<KnotAdam>,
+    /// Whether [`start`] has run (objects may still be empty if none was seen).
+    pub started: bool,
+    /// One ID map per training frame, at the training resolution.
+    pub id_maps: Vec<Vec<u8>>,
+    /// Name of each object ID, from the scene (objects.json, else the segmentation's
+    /// dictionary, else `object-<id>`).
+    pub names: Vec<(u8, String)>,
+    /// What [`start`] found per object (empty before it ran, and after a resume).
+    pub start_reports: Vec<start::StartReport>,
+    /// Persistent top-k votes and the transfer rule (None with `transfer = false`).
+    pub membership: Option<membership::Membership>,
+    rows: Vec<Vec<u32>>,
+    poses: Vec<Pose>,
+    grads: Vec<TrajectoryGrad>,
+    mask: mask_loss::MaskLoss,
+}
+
+impl RigidObjects {
+    pub fn new(cfg: ObjectsConfig, id_maps: Vec<Vec<u8>>, names: Vec<(u8, String)>) -> Self {
+        let membership = cfg.transfer.then(|| {
+            let maps = id_maps.iter().map(Vec::as_slice);
+            membership::Membership::new(
+                maps,
+                cfg.votes_k,
+                cfg.transfer_share,
+                cfg.transfer_min_weight,
+            )
+        });
+        Self {
+            start_reports: Vec::new(),
+            membership,
+            cfg,
+            objects: Vec::new(),
+            knot_adam: Vec::new(),
+            started: false,
+            id_maps,
+            names,
+            rows: Vec::new(),
+            poses: Vec::new(),
+            grads: Vec::new(),
+            mask: mask_loss::MaskLoss::default(),
+        }
+    }
+
+    /// The node of a run whose config enables it (reads the training views' ID maps).
+    pub fn for_run(cfg: &crate::TrainConfig, ds: &scene::Dataset) -> crate::Result<Option<Self>> {
+        if !cfg.objects.enabled {
+            return Ok(None);
+        }
+        let maps = crate::id_maps::load(ds)?;
+        Ok(Some(Self::new(
+            cfg.objects.clone(),
+            maps,
+            crate::id_maps::names(ds),
+        )))
+    }
+
+    pub fn view<'a>(&'a self, column: &'a [u8]) -> ObjectsView<'a> {
+        ObjectsView {
+            objects: &self.objects,
+            column,
+        }
+    }
+
+    /// Before the objects start: zero `dL/dimage` on object pixels of training view `frame`,
+    /// so the background is not fitted to objects it will not own.
+    pub fn mask_background(&self, iteration: u32, frame: usize, dl_dimage: &mut [f32]) {
+        if iteration >= self.cfg.start_iter {
+            return;
+        }
+        for (p, &id) in self.id_maps[frame].iter().enumerate() {
+            if id != NO_OBJECT {
+                dl_dimage[p * 3..p * 3 + 3].fill(0.0);
+            }
+        }
+    }
+
+    /// Places the object rows at time `t` (after `deform::apply`) and keeps the poses for
+    /// [`RigidObjects::backward`].
+    pub fn place(&mut self, model: &GaussianModel, column: &[u8], t: f32, out: &mut Deformed) {
+        place::rows_by_object(&self.objects, column, &mut self.rows);
+        place::place(&self.objects, &self.rows, model, t, out, &mut self.poses);
+    }
+
+    /// The alpha-against-mask term for training view `frame` (objects rendered alone, each
+    /// moving object against its own mask); adds its gradient into `grads` (world space).
+    pub fn add_mask_loss(
+        &mut self,
+        frame: usize,
+        cam: &splat::Camera,
+        model: &GaussianModel,
+        deformed: &Deformed,
+        grads: &mut splat::Gradients,
+    ) -> Result<f32, splat::SplatError> {
+        if self.cfg.lambda_mask == 0.0 {
+            return Ok(0.0);
+        }
+        let inp = mask_loss::MaskInput {
+            objects: &self.objects,
+            rows: &self.rows,
+            id_map: &self.id_maps[frame],
+            cam,
+            model,
+            deformed,
+            lambda: self.cfg.lambda_mask,
+        };
+        self.mask.add(&inp, grads)
+    }
+
+    /// Chains the object rows' world gradients back (see [`place::backward`]) and collects
+    /// the trajectories' gradients.
+    pub fn backward(
+        &mut self,
+        model: &GaussianModel,
+        g_means: &[f32],
+        g_quats: &[f32],
+        canon: &mut CanonicalGrads,
+    ) {
+        self.grads.clear();
+        self.grads.extend(
+            self.objects
+                .iter()
+                .map(|o| TrajectoryGrad::zeros(o.trajectory.len())),
+        );
+        place::backward(
+            &self.objects,
+            &self.rows,
+            model,
+            &self.poses,
+            g_means,
+            g_quats,
+            canon,
+            &mut self.grads,
+        );
+    }
+
+    /// Adam on the knots that this step's view touched.
+    pub fn step(&mut self, hp: AdamHyper) {
+        let lr = (self.cfg.lr_translation, self.cfg.lr_rotation);
+        for ((o, a), g) in self
+            .objects
+            .iter_mut()
+            .zip(&mut self.knot_adam)
+            .zip(&self.grads)
+        {
+            if !o.is_static {
+                a.step_touched(&mut o.trajectory, g, hp, lr);
+            }
+        }
+    }
+
+    /// Top-k entries per pixel the training render must record for the votes (0: none).
+    pub fn topk(&self) -> usize {
+        match &self.membership {
+            Some(m) if self.started => m.k,
+            _ => 0,
+        }
+    }
+
+    /// Adds the training view's top-k votes (`ids`/`weights` with `stride` entries a pixel).
+    pub fn record_votes(
+        &self,
+        frame: usize,
+        ids: &[u32],
+        weights: &[f32],
+        stride: usize,
+        aux: &mut crate::state::AuxStore,
+    ) -> Result<(), String> {
+        let Some(m) = self
+            .membership
+            .as_ref()
+            .filter(|_| self.started && stride > 0)
+        else {
+            return Ok(());
+        };
+        let votes = aux.get_or_zeros(membership::VOTES_NAME, m.cols())?;
+        m.record(ids, weights, stride, &self.id_maps[frame], votes)
+    }
+
+    /// Moves the Gaussians their votes elect into other objects (at densification).
+    pub fn transfer(
+        &self,
+        state: &mut crate::state::GaussianState,
+        at: &membership::StepPlacement,
+    ) -> usize {
+        match &self.membership {
+            Some(m) if self.started => m.transfer(state, &self.objects, at),
+            _ => 0,
+        }
+    }
+
+    /// The name recorded for object `id`.
+    pub fn name_of(&self, id: u8) -> String {
+        self.names
+            .iter()
+            .find(|(i, _)| *i == id)
+            .map_or_else(|| format!("object-{id}"), |(_, n)| n.clone())
+    }
+}

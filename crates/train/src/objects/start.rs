@@ -1,0 +1,199 @@
+//! Bringing the objects in at `start_iter`: read the static background's depth in every
+//! training view, then for each object of the ID maps: its sightings in time order, its
+//! first Gaussians lifted from its first sighting's mask, and the time-progressive fit
+//! through the others ([`super::track`]), which also decides whether it is static.
+
+use super::lift::{self, DepthMap, LiftInput};
+use super::track::{self, TrackView};
+use super::{knots::KnotAdam, RigidObject, RigidObjects, NO_OBJECT};
+use crate::deform::{self, Deformed};
+use crate::model::GaussianModel;
+use crate::state::GaussianState;
+use rand::{Rng, SeedableRng};
+use scene::Dataset;
+use splat::Rasterizer;
+
+/// What [`start`] found, per object, for the log.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StartReport {
+    pub id: u8,
+    pub name: String,
+    pub sightings: usize,
+    pub is_static: bool,
+    /// RMS motion of the tracked trajectory under the gauge that makes it move least, and
+    /// the object's size (world units, after the gauge).
+    pub residual_motion: f32,
+    pub size: f32,
+    pub gaussians: usize,
+    /// The gauge applied to the lifted guess of its size and distance.
+    pub scale: f32,
+}
+
+/// The static background's camera depth in every training view (δ = 0: the background
+/// has been trained static until now).
+fn background_depths(
+    model: &GaussianModel,
+    ds: &Dataset,
+) -> Result<Vec<DepthMap>, splat::SplatError> {
+    let mut d = Deformed::default();
+    deform::apply(model, None, &mut d);
+    let mut raster = Rasterizer::new();
+    ds.train
+        .iter()
+        .map(|f| {
+            lift::render_depth(
+                &mut raster,
+                &d.means,
+                &d.quats,
+                &d.scales,
+                &model.opacity_logits,
+                &f.camera,
+            )
+        })
+        .collect()
+}
+
+/// A sighting: a training view where the object's mask is large enough, with the depth of
+/// its surroundings and its size (the mask's diagonal) in world units at that depth.
+struct Sighting {
+    frame: usize,
+    depth: f32,
+    size: f32,
+}
+
+fn sightings(node: &RigidObjects, ds: &Dataset, depths: &[DepthMap], id: u8) -> Vec<Sighting> {
+    let mut out = Vec::new();
+    for (f, frame) in ds.train.iter().enumerate() {
+        let map = &node.id_maps[f];
+        let (px, bb) = lift::mask_pixels(map, frame.camera.width, id);
+        if px.len() < node.cfg.min_pixels as usize {
+            continue;
+        }
+        let Some(depth) = lift::ring_depth(&depths[f], map, id, node.cfg.ring_px) else {
+            continue;
+        };
+        let diag = ((bb[2] - bb[0]) as f32).hypot((bb[3] - bb[1]) as f32);
+        out.push(Sighting {
+            frame: f,
+            depth,
+            size: diag * depth / frame.camera.fx,
+        });
+    }
+    out.sort_by(|a, b| ds.train[a.frame].time.total_cmp(&ds.train[b.frame].time));
+    out
+}
+
+fn lift_at(
+    node: &RigidObjects,
+    ds: &Dataset,
+    s: &Sighting,
+    id: u8,
+    thickness: f32,
+    rng: &mut impl Rng,
+) -> GaussianModel {
+    let frame = &ds.train[s.frame];
+    let image = frame.image.to_f32();
+    let inp = LiftInput {
+        cam: &frame.camera,
+        image: &image,
+        id_map: &node.id_maps[s.frame],
+        id,
+        depth: s.depth,
+    };
+    lift::lift(&inp, node.cfg.lift_points, thickness, rng)
+}
+
+/// The tracking views of an object's sightings.
+fn views<'a>(
+    node: &'a RigidObjects,
+    ds: &'a Dataset,
+    depths: &'a [DepthMap],
+    seen: &[Sighting],
+) -> Vec<TrackView<'a>> {
+    seen.iter()
+        .map(|s| TrackView {
+            cam: &ds.train[s.frame].camera,
+            time: ds.train[s.frame].time,
+            image: &ds.train[s.frame].image,
+            id_map: &node.id_maps[s.frame],
+            background: Some(&depths[s.frame]),
+        })
+        .collect()
+}
+
+/// Object IDs present in the ID maps, ascending.
+fn object_ids(maps: &[Vec<u8>]) -> Vec<u8> {
+    let mut seen = [false; 256];
+    for m in maps {
+        for &v in m {
+            seen[v as usize] = true;
+        }
+    }
+    (0..NO_OBJECT).filter(|&i| seen[i as usize]).collect()
+}
+
+/// Lifts, tests, tracks and places every object, appends their Gaussians to `state` (with
+/// their object in the column) and fills `node.objects`.
+pub fn start(
+    node: &mut RigidObjects,
+    state: &mut GaussianState,
+    ds: &Dataset,
+    rng: &mut impl Rng,
+) -> Result<Vec<StartReport>, splat::SplatError> {
+    let depths = background_depths(&state.model, ds)?;
+    let ids: Vec<(u8, Vec<Sighting>)> = object_ids(&node.id_maps)
+        .into_iter()
+        .map(|id| (id, sightings(node, ds, &depths, id)))
+        .filter(|(_, seen)| !seen.is_empty())
+        .collect();
+    let mut done = Vec::new();
+    for (id, seen) in &ids {
+        let v = views(node, ds, &depths, seen);
+        // The lifts draw from their own stream, seeded from the run's, so runs repeat.
+        let mut lift_rng = rand_chacha::ChaCha8Rng::seed_from_u64(rng.gen());
+        let mut lift = |th: f32| lift_at(node, ds, &seen[0], *id, th, &mut lift_rng);
+        done.push(track::fit(
+            &v,
+            *id,
+            &node.name_of(*id),
+            &mut lift,
+            &node.cfg,
+            rng,
+        )?);
+    }
+    let mut reports = Vec::new();
+    for (f, (id, seen)) in done.into_iter().zip(&ids) {
+        let id = *id;
+        let name = node.name_of(id);
+        state.append_object(&f.model, id);
+        let size = median(seen.iter().map(|s| s.size).collect()) * f.scale;
+        tracing::info!(object = %name, sightings = seen.len(), is_static = f.is_static,
+            residual_motion = f.residual_motion, size, scale = f.scale,
+            gaussians = f.model.len(), "object started");
+        reports.push(StartReport {
+            id,
+            name: name.clone(),
+            sightings: seen.len(),
+            is_static: f.is_static,
+            residual_motion: f.residual_motion,
+            size,
+            gaussians: f.model.len(),
+            scale: f.scale,
+        });
+        node.knot_adam.push(KnotAdam::zeros(f.trajectory.len()));
+        node.objects
+            .push(RigidObject::new(id, name, f.trajectory, f.is_static));
+    }
+    node.started = true;
+    node.start_reports = reports.clone();
+    Ok(reports)
+}
+
+fn median(mut v: Vec<f32>) -> f32 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mid = v.len() / 2;
+    v.select_nth_unstable_by(mid, f32::total_cmp);
+    v[mid]
+}

@@ -1,0 +1,148 @@
+//! The rigid objects in a checkpoint's `state.safetensors`: metadata `objects` (JSON: whether
+//! they started, and per object its ID, name, static flag and knot count) and per object
+//! slot `s` the tensors `objects.s.times [K]`, `.translations [K, 3]`, `.rotations [K, 4]`
+//! and the knots' Adam moments and steps. The per-Gaussian object column is the checkpoint's
+//! `object` tensor (written by `checkpoint`).
+
+use super::knots::KnotAdam;
+use super::trajectory::Trajectory;
+use super::{RigidObject, RigidObjects};
+use crate::adam::Adam;
+use serde::{Deserialize, Serialize};
+
+#[derive(Serialize, Deserialize)]
+struct Meta {
+    started: bool,
+    objects: Vec<ObjectMeta>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct ObjectMeta {
+    id: u8,
+    name: String,
+    #[serde(rename = "static")]
+    is_static: bool,
+    knots: usize,
+}
+
+/// The `objects` metadata value.
+pub fn metadata(node: &RigidObjects) -> String {
+    let m = Meta {
+        started: node.started,
+        objects: node
+            .objects
+            .iter()
+            .map(|o| ObjectMeta {
+                id: o.id,
+                name: o.name.clone(),
+                is_static: o.is_static,
+                knots: o.trajectory.len(),
+            })
+            .collect(),
+    };
+    serde_json::to_string(&m).expect("plain data serializes")
+}
+
+/// Hands every tensor of the objects to `put(name, shape, values)`.
+pub fn write_tensors(node: &RigidObjects, put: &mut impl FnMut(String, Vec<usize>, &[f32])) {
+    for (s, (o, a)) in node.objects.iter().zip(&node.knot_adam).enumerate() {
+        let tr = &o.trajectory;
+        let k = tr.len();
+        let key = |name: &str| format!("objects.{s}.{name}");
+        put(key("times"), vec![k], &tr.times);
+        put(
+            key("translations"),
+            vec![k, 3],
+            tr.translations.as_flattened(),
+        );
+        put(key("rotations"), vec![k, 4], tr.rotations.as_flattened());
+        for (group, adams, w) in [("t", &a.translation, 3), ("r", &a.rotation, 4)] {
+            let m: Vec<f32> = adams.iter().flat_map(|x| x.m.clone()).collect();
+            let v: Vec<f32> = adams.iter().flat_map(|x| x.v.clone()).collect();
+            let steps: Vec<f32> = adams.iter().map(|x| x.step as f32).collect();
+            put(key(&format!("adam.{group}.m")), vec![k, w], &m);
+            put(key(&format!("adam.{group}.v")), vec![k, w], &v);
+            put(key(&format!("adam.{group}.steps")), vec![k], &steps);
+        }
+    }
+}
+
+/// What a checkpoint holds of the objects.
+pub struct Stored {
+    pub started: bool,
+    pub objects: Vec<RigidObject>,
+    pub knot_adam: Vec<KnotAdam>,
+}
+
+/// Reads the objects back; `tensor(name, len)` returns an f32 tensor of `len` finite values
+/// or an error naming it. `meta` is the `objects` metadata (None: a run without objects).
+pub fn read<E>(
+    meta: Option<&str>,
+    tensor: impl Fn(&str, usize) -> Result<Vec<f32>, E>,
+    bad: impl Fn(String) -> E,
+) -> Result<Stored, E> {
+    let Some(text) = meta else {
+        return Ok(Stored {
+            started: false,
+            objects: Vec::new(),
+            knot_adam: Vec::new(),
+        });
+    };
+    let m: Meta = serde_json::from_str(text)
+        .map_err(|e| bad(format!("metadata `objects` is not valid: {e}")))?;
+    let mut objects = Vec::new();
+    let mut knot_adam = Vec::new();
+    for (s, om) in m.objects.iter().enumerate() {
+        let k = om.knots;
+        if k == 0 {
+            return Err(bad(format!("object {} has no trajectory knots", om.name)));
+        }
+        let key = |name: &str| format!("objects.{s}.{name}");
+        let times = tensor(&key("times"), k)?;
+        if times.windows(2).any(|w| w[1] < w[0]) {
+            return Err(bad(format!(
+                "object {}: knot times are not ascending",
+                om.name
+            )));
+        }
+        let trajectory = Trajectory {
+            times,
+            translations: rows(&tensor(&key("translations"), k * 3)?),
+            rotations: rows(&tensor(&key("rotations"), k * 4)?),
+        };
+        let mut adam = KnotAdam::zeros(k);
+        for (group, adams, w) in [
+            ("t", &mut adam.translation, 3),
+            ("r", &mut adam.rotation, 4),
+        ] {
+            let m = tensor(&key(&format!("adam.{group}.m")), k * w)?;
+            let v = tensor(&key(&format!("adam.{group}.v")), k * w)?;
+            let steps = tensor(&key(&format!("adam.{group}.steps")), k)?;
+            for (i, a) in adams.iter_mut().enumerate() {
+                *a = Adam {
+                    m: m[i * w..(i + 1) * w].to_vec(),
+                    v: v[i * w..(i + 1) * w].to_vec(),
+                    step: steps[i].max(0.0) as u64,
+                };
+            }
+        }
+        objects.push(RigidObject::new(
+            om.id,
+            om.name.clone(),
+            trajectory,
+            om.is_static,
+        ));
+        knot_adam.push(adam);
+    }
+    Ok(Stored {
+        started: m.started,
+        objects,
+        knot_adam,
+    })
+}
+
+fn rows<const W: usize>(v: &[f32]) -> Vec<[f32; W]> {
+    v.chunks_exact(W)
+        .map(|c| c.try_into().expect("chunks of W"))
+        .collect()
+}

@@ -1,0 +1,524 @@
+//! Time-progressive fitting of one object (Dynamic 3D Gaussians' online fitting, on one
+//! camera): its Gaussians, lifted from its first sighting, are tracked through the views in
+//! time order. Each new view's pose is predicted at constant velocity from the two before
+//! it, then fitted to that view alone; then the object's shape and appearance, and the poses
+//! of the views seen so far, are refined on randomly chosen views among those. The loss of
+//! a view looks only at the object: its colour inside its mask, and its alpha against its
+//! mask, balanced (missing and spilled area count alike, both relative to the mask's area).
+//! Rendering error alone cannot find a large motion in a monocular video (DreamScene4D);
+//! the mask term can, because it has a gradient wherever the render and the mask overlap,
+//! and a constant-velocity prediction keeps them overlapping from one view to the next.
+
+use super::contact;
+use super::gauge;
+use super::knots::KnotAdam;
+use super::lift::DepthMap;
+use super::place::{self, NO_OBJECT};
+use super::trajectory::{Trajectory, TrajectoryGrad};
+use super::{ObjectsConfig, RigidObject};
+use crate::adam::{Adam, AdamHyper};
+use crate::deform::{self, CanonicalGrads, Deformed};
+use crate::model::{GaussianModel, ROWS};
+use crate::quat;
+use rand::Rng;
+use splat::{Camera, Gradients, Rasterizer, RenderOptions};
+
+/// One view of the object: a training frame where its mask was seen.
+pub struct TrackView<'a> {
+    pub cam: &'a Camera,
+    pub time: f32,
+    pub image: &'a scene::ImageU8,
+    /// The static background's depth in this view, when known (for the contact).
+    pub background: Option<&'a DepthMap>,
+    /// The frame's object-ID map at the training resolution.
+    pub id_map: &'a [u8],
+}
+
+/// Loss of one view and its gradients w.r.t. the object-only render.
+struct ViewLoss {
+    value: f32,
+    dl_dimage: Vec<f32>,
+    dl_dalpha: Vec<f32>,
+}
+
+/// `L = mean_M |C − I| + λ·(Σ_M (1 − α) + Σ_out α) / |M|`, where `out` excludes the
+/// pixels of other objects (they may occlude this one).
+fn view_loss(
+    view: &TrackView,
+    gt: &[f32],
+    id: u8,
+    image: &[f32],
+    alpha: &[f32],
+    lambda: f32,
+) -> ViewLoss {
+    let n = alpha.len();
+    let area = view.id_map.iter().filter(|&&v| v == id).count().max(1) as f32;
+    let mut out = ViewLoss {
+        value: 0.0,
+        dl_dimage: vec![0.0; n * 3],
+        dl_dalpha: vec![0.0; n],
+    };
+    let (wc, wm) = (1.0 / (3.0 * area), lambda / area);
+    for p in 0..n {
+        let v = view.id_map[p];
+        if v == id {
+            for c in 0..3 {
+                let d = image[p * 3 + c] - gt[p * 3 + c];
+                out.value += wc * d.abs();
+                out.dl_dimage[p * 3 + c] = wc * d.signum();
+            }
+            out.value += wm * (1.0 - alpha[p]);
+            out.dl_dalpha[p] = -wm;
+        } else if v == NO_OBJECT {
+            out.value += wm * alpha[p];
+            out.dl_dalpha[p] = wm;
+        }
+    }
+    out
+}
+
+/// The object being tracked: its Gaussians (object frame), one knot per view, optimizers.
+pub struct Tracker<'a> {
+    views: &'a [TrackView<'a>],
+    cfg: &'a ObjectsConfig,
+    object: RigidObject,
+    model: GaussianModel,
+    adam: [Adam; 5],
+    knots: KnotAdam,
+    raster: Rasterizer,
+    deformed: Deformed,
+    grads: Gradients,
+    canon: CanonicalGrads,
+    rows: Vec<Vec<u32>>,
+    gt: Vec<f32>,
+    /// Per view: the distance from its camera that the contact correction asks for.
+    springs: Vec<Option<f32>>,
+    /// The gauge applied so far to the first guess of size and distance.
+    scale: f32,
+    residual_motion: f32,
+}
+
+const HP: AdamHyper = AdamHyper {
+    beta1: 0.9,
+    beta2: 0.999,
+    eps: 1e-15,
+};
+
+impl<'a> Tracker<'a> {
+    /// One forward/backward on view `v`; steps the view's knot and/or the Gaussians.
+    fn step(&mut self, v: usize, pose: bool, shape: bool) -> Result<f32, splat::SplatError> {
+        let view = &self.views[v];
+        deform::apply(&self.model, None, &mut self.deformed);
+        let objects = std::slice::from_ref(&self.object);
+        let mut poses = Vec::new();
+        place::place(
+            objects,
+            &self.rows,
+            &self.model,
+            view.time,
+            &mut self.deformed,
+            &mut poses,
+        );
+        let g = crate::trainer::gaussians(&self.model, &self.deformed);
+        let opts = RenderOptions::default();
+        let out = self.raster.forward(&g, view.cam, &opts)?;
+        view.image.to_f32_into(&mut self.gt);
+        let lambda = self.cfg.lambda_mask;
+        let loss = view_loss(view, &self.gt, self.object.id, out.image, out.alpha, lambda);
+        self.raster.backward(
+            &g,
+            view.cam,
+            &opts,
+            &loss.dl_dimage,
+            Some(&loss.dl_dalpha),
+            &mut self.grads,
+        )?;
+        let gr = &self.grads;
+        deform::backward(
+            &self.model,
+            &gr.means,
+            &gr.quats,
+            &gr.scales,
+            &mut self.canon,
+        );
+        let mut tg = vec![TrajectoryGrad::zeros(self.object.trajectory.len())];
+        place::backward(
+            objects,
+            &self.rows,
+            &self.model,
+            &poses,
+            &gr.means,
+            &gr.quats,
+            &mut self.canon,
+            &mut tg,
+        );
+        if let Some(target) = self.springs.get(v).copied().flatten() {
+            let p = self.object.trajectory.translations[v];
+            let g = contact::spring_grad(p, view.cam.center(), target, self.cfg.contact_weight);
+            for c in 0..3 {
+                tg[0].translations[v][c] += g[c];
+            }
+        }
+        if pose {
+            let lr = (self.cfg.track_lr_translation, self.cfg.track_lr_rotation);
+            self.knots
+                .step_knot(&mut self.object.trajectory, &tg[0], v, HP, lr);
+        }
+        if shape {
+            self.step_shape();
+        }
+        Ok(loss.value)
+    }
+
+    fn step_shape(&mut self) {
+        let c = self.cfg;
+        let [a_means, _, a_scales, a_opacity, a_sh] = &mut self.adam;
+        let m = &mut self.model;
+        a_means.step(&mut m.means, &self.canon.means, HP, c.track_lr_means);
+        a_scales.step(
+            &mut m.log_scales,
+            &self.canon.log_scales,
+            HP,
+            c.track_lr_scales,
+        );
+        let g = &self.grads;
+        a_opacity.step(
+            &mut m.opacity_logits,
+            &g.opacity_logits,
+            HP,
+            c.track_lr_opacity,
+        );
+        let lr_dc = c.track_lr_colors;
+        a_sh.step_rows(&mut m.sh, &g.colors, HP, ROWS[4], |k| {
+            if k < 3 {
+                lr_dc
+            } else {
+                0.0
+            }
+        });
+    }
+
+    /// The contact ratio of every view that sees the background behind the object
+    /// (`contact.rs`), as `(time, ln q)`.
+    fn contact_profile(&mut self) -> Result<Vec<(usize, f32, f32)>, splat::SplatError> {
+        let mut out = Vec::new();
+        for (k, v) in self.views.iter().enumerate() {
+            let Some(bg) = v.background else { continue };
+            let q = self.cfg.scale_quantile;
+            let ring = self.cfg.ring_px;
+            let r = contact::view_ratio(
+                &mut self.raster,
+                &self.object,
+                &self.model,
+                v.cam,
+                v.time,
+                v.id_map,
+                bg,
+                q,
+                ring,
+                10,
+            )?;
+            if let Some(r) = r.filter(|r| *r > 0.0) {
+                out.push((k, v.time, r.ln()));
+            }
+        }
+        Ok(out)
+    }
+
+    /// One contact correction (`contact.rs`): the profile's robust level applied as the
+    /// gauge, its slope as spring targets for the views' distances. Returns the gauge factor
+    /// and the slope (None when no view sees a background behind the object).
+    fn correct_contact(&mut self, target: f32) -> Result<Option<(f32, f32)>, splat::SplatError> {
+        let profile = self.contact_profile()?;
+        let pts: Vec<(f32, f32)> = profile.iter().map(|p| (p.1, p.2)).collect();
+        let Some((level, slope, t_mean)) = contact::robust_line(&pts) else {
+            return Ok(None);
+        };
+        let s = (level.exp() / target).clamp(0.5, 2.0);
+        let centres: Vec<[f32; 3]> = self.views.iter().map(|v| v.cam.center()).collect();
+        gauge::apply_scale(&mut self.model, &mut self.object.trajectory, &centres, s);
+        let tr = &self.object.trajectory;
+        self.springs = (0..tr.len())
+            .map(|k| {
+                let c = centres[k];
+                let p = tr.translations[k];
+                let d =
+                    ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt();
+                Some(d * (slope * (tr.times[k] - t_mean)).exp())
+            })
+            .collect();
+        Ok(Some((s, slope)))
+    }
+
+    /// Joint refinement of shape, appearance and every pose on views drawn uniformly.
+    fn refine(&mut self, rng: &mut impl Rng) -> Result<(), splat::SplatError> {
+        for _ in 0..self.cfg.track_refine_iters {
+            let j = rng.gen_range(0..self.views.len());
+            self.step(j, true, true)?;
+        }
+        Ok(())
+    }
+
+    /// Constant-velocity prediction of knot `k` from knots `k−1` and `k−2` (a copy of
+    /// knot `k−1` when it is the second view).
+    fn predict(&mut self, k: usize) {
+        let tr = &mut self.object.trajectory;
+        let (p1, q1) = (
+            tr.translations[k - 1],
+            quat::normalize(&tr.rotations[k - 1]).0,
+        );
+        if k < 2 {
+            tr.translations[k] = p1;
+            tr.rotations[k] = q1;
+            return;
+        }
+        let (p0, q0) = (
+            tr.translations[k - 2],
+            quat::normalize(&tr.rotations[k - 2]).0,
+        );
+        let dt0 = tr.times[k - 1] - tr.times[k - 2];
+        let f = if dt0 > 0.0 {
+            (tr.times[k] - tr.times[k - 1]) / dt0
+        } else {
+            0.0
+        };
+        tr.translations[k] = std::array::from_fn(|c| p1[c] + f * (p1[c] - p0[c]));
+        // Angular velocity: the step q1·q0⁻¹ (world frame), repeated f times.
+        let step = quat::to_rotvec(quat::mul(q1, quat::conj(q0))).map(|v| v * f);
+        tr.rotations[k] = quat::mul(quat::from_rotvec(step), q1);
+    }
+}
+
+impl<'a> Tracker<'a> {
+    /// A tracker for the object `id` whose first Gaussians are `lifted` (world space, at
+    /// the first view); the views are in time order, one knot each.
+    pub fn new(
+        views: &'a [TrackView<'a>],
+        id: u8,
+        name: &str,
+        lifted: GaussianModel,
+        cfg: &'a ObjectsConfig,
+    ) -> Self {
+        let n = lifted.len();
+        let origin = centroid(&lifted.means);
+        let mut model = lifted;
+        for m in model.means.chunks_exact_mut(3) {
+            for c in 0..3 {
+                m[c] -= origin[c];
+            }
+        }
+        let times: Vec<f32> = views.iter().map(|v| v.time).collect();
+        let k = times.len();
+        let trajectory = Trajectory {
+            times,
+            translations: vec![origin; k],
+            rotations: vec![[1.0, 0.0, 0.0, 0.0]; k],
+        };
+        Self {
+            views,
+            cfg,
+            object: RigidObject::new(id, name.into(), trajectory, false),
+            model,
+            adam: ROWS.map(|r| Adam::zeros(n * r)),
+            knots: KnotAdam::zeros(k),
+            raster: Rasterizer::new(),
+            deformed: Deformed::default(),
+            grads: Gradients::default(),
+            canon: CanonicalGrads::default(),
+            rows: vec![(0..n as u32).collect()],
+            gt: Vec::new(),
+            springs: Vec::new(),
+            scale: 1.0,
+            residual_motion: 0.0,
+        }
+    }
+
+    /// The time-progressive pass through the views, then a joint refinement; returns the
+    /// pose loss of the last view.
+    pub fn sequential(&mut self, rng: &mut impl Rng) -> Result<f32, splat::SplatError> {
+        let mut last = 0.0;
+        for v in 0..self.views.len() {
+            if v > 0 {
+                self.predict(v);
+                for _ in 0..self.cfg.track_pose_iters {
+                    last = self.step(v, true, false)?;
+                }
+            }
+            for _ in 0..self.cfg.track_shape_iters {
+                // Half the refinement on the newest views, half on any view seen so far.
+                let lo = if rng.gen::<bool>() {
+                    v.saturating_sub(4)
+                } else {
+                    0
+                };
+                let j = rng.gen_range(lo..=v);
+                self.step(j, true, true)?;
+            }
+        }
+        self.refine(rng)?;
+        Ok(last)
+    }
+
+    /// The factor under which the trajectory stands (nearly) still, if one does: a static
+    /// object tracked at the wrong depth seems to move with the camera
+    /// (`gauge::least_motion_scale`).
+    pub fn still_scale(&mut self) -> Option<f32> {
+        let centres: Vec<[f32; 3]> = self.views.iter().map(|v| v.cam.center()).collect();
+        let size = extent(&self.model.means);
+        let tr = &self.object.trajectory;
+        let (s, rms) = gauge::least_motion_scale(tr, &centres);
+        self.residual_motion = rms;
+        let (_, angle) = tr.motion_extent();
+        let c = self.cfg;
+        let still = tr.len() < 2
+            || (rms < c.static_motion * size * s && angle.to_degrees() < c.static_angle_deg);
+        still.then_some(s)
+    }
+
+    /// Makes the object static under the gauge `s`: one pose, from the middle view.
+    pub fn hold_still(&mut self, s: f32) {
+        let centres: Vec<[f32; 3]> = self.views.iter().map(|v| v.cam.center()).collect();
+        gauge::apply_scale(&mut self.model, &mut self.object.trajectory, &centres, s);
+        let tr = &self.object.trajectory;
+        let mid = tr.len() / 2;
+        self.object.trajectory =
+            Trajectory::constant(tr.times[mid], tr.translations[mid], tr.rotations[mid]);
+        self.object.is_static = true;
+        self.scale *= s;
+    }
+
+    /// The median contact ratio over the views (how the static scene reads behind an
+    /// object that touches it; `contact.rs`), None without a background behind it.
+    pub fn contact_ratio(&mut self) -> Result<Option<f32>, splat::SplatError> {
+        let mut logs: Vec<f32> = self.contact_profile()?.iter().map(|p| p.2).collect();
+        if logs.is_empty() {
+            return Ok(None);
+        }
+        let mid = logs.len() / 2;
+        logs.select_nth_unstable_by(mid, f32::total_cmp);
+        Ok(Some(logs[mid].exp()))
+    }
+
+    /// `contact_rounds` contact corrections towards the ratio `target`, each followed by a
+    /// joint refinement (`contact.rs`).
+    pub fn settle_contact(
+        &mut self,
+        target: f32,
+        rng: &mut impl Rng,
+    ) -> Result<(), splat::SplatError> {
+        for _ in 0..self.cfg.contact_rounds {
+            let Some((s, slope)) = self.correct_contact(target)? else {
+                break;
+            };
+            self.scale *= s;
+            tracing::debug!(object = %self.object.name, gauge = s, slope, "contact correction");
+            self.refine(rng)?;
+        }
+        Ok(())
+    }
+
+    /// Mean loss over every view with the current shape and poses (no step taken).
+    pub fn mean_loss(&mut self) -> Result<f32, splat::SplatError> {
+        let mut sum = 0.0;
+        for v in 0..self.views.len() {
+            sum += self.step(v, false, false)?;
+        }
+        Ok(sum / self.views.len().max(1) as f32)
+    }
+
+    pub fn is_static(&self) -> bool {
+        self.object.is_static
+    }
+
+    pub fn finish(self) -> Tracked {
+        let o = self.object;
+        tracing::info!(object = %o.name, views = self.views.len(), is_static = o.is_static, scale = self.scale, "tracked");
+        Tracked {
+            id: o.id,
+            model: self.model,
+            is_static: o.is_static,
+            trajectory: o.trajectory,
+            scale: self.scale,
+            residual_motion: self.residual_motion,
+        }
+    }
+}
+
+/// The object's Gaussians in its own frame and its trajectory (one knot per view) from the
+/// views in time order. `lift(thickness)` gives its first Gaussians (world space, at the
+/// first view) lifted with that depth spread. Tracked from the first of
+/// `cfg.lift_thickness`, an object that stands still under its own gauge is static (one
+/// pose); a moving one is tracked from every thickness, the fit with the lowest mean loss
+/// over its views is kept, and its distance is corrected by contact (`contact_rounds`).
+pub fn fit(
+    views: &[TrackView],
+    id: u8,
+    name: &str,
+    lift: &mut dyn FnMut(f32) -> GaussianModel,
+    cfg: &ObjectsConfig,
+    rng: &mut impl Rng,
+) -> Result<Tracked, splat::SplatError> {
+    let mut best: Option<(f32, Tracker)> = None;
+    for (i, &th) in cfg.lift_thickness.iter().enumerate() {
+        let mut t = Tracker::new(views, id, name, lift(th), cfg);
+        t.sequential(rng)?;
+        if i == 0 {
+            if let Some(s) = t.still_scale() {
+                t.hold_still(s);
+                return Ok(t.finish());
+            }
+        }
+        let loss = t.mean_loss()?;
+        tracing::debug!(
+            object = name,
+            thickness = th,
+            loss,
+            "tracked from a lifted thickness"
+        );
+        if best.as_ref().is_none_or(|b| loss < b.0) {
+            best = Some((loss, t));
+        }
+    }
+    let (_, mut t) = best.expect("at least one thickness (validated)");
+    t.settle_contact(1.0, rng)?;
+    Ok(t.finish())
+}
+
+/// What [`fit`] found.
+pub struct Tracked {
+    pub id: u8,
+    /// Gaussians in the object's frame.
+    pub model: GaussianModel,
+    pub trajectory: Trajectory,
+    /// No motion under the gauge that makes it move least (one pose then).
+    pub is_static: bool,
+    /// The gauge applied to the first guess of its size and distance.
+    pub scale: f32,
+    /// RMS motion of its origin under the least-motion gauge (world units).
+    pub residual_motion: f32,
+}
+
+/// Largest side of the bounding box of `N·3` points.
+fn extent(means: &[f32]) -> f32 {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for m in means.chunks_exact(3) {
+        for k in 0..3 {
+            lo[k] = lo[k].min(m[k]);
+            hi[k] = hi[k].max(m[k]);
+        }
+    }
+    (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f32::max)
+}
+
+/// Mean of `N·3` points.
+pub fn centroid(means: &[f32]) -> [f32; 3] {
+    let n = (means.len() / 3).max(1) as f64;
+    let mut s = [0.0f64; 3];
+    for m in means.chunks_exact(3) {
+        for c in 0..3 {
+            s[c] += f64::from(m[c]);
+        }
+    }
+    s.map(|v| (v / n) as f32)
+}

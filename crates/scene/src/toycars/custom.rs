@@ -167,14 +167,12 @@ impl Layout {
     }
 
     /// Pairs of objects whose boxes intersect at some frame (the first such frame each):
-    /// objects pass through each other, which no camera could film.
+    /// objects passing through each other (or a prop parked inside a vehicle), which no
+    /// camera could film.
     pub fn collisions(&self, frames: usize) -> Vec<String> {
         let mut out = Vec::new();
         for i in 0..self.models.len() {
             for j in i + 1..self.models.len() {
-                if !(self.is_moving(i) || self.is_moving(j)) {
-                    continue;
-                }
                 let hit = (0..frames).find_map(|f| {
                     let t = f as f32 / (frames - 1) as f32;
                     self.boxes_meet(i, j, t).then_some((f, t))
@@ -257,8 +255,10 @@ mod tests {
         let gone = layout.out_of_view(160, 120, 24);
         assert_eq!(gone.len(), 1, "{gone:?}");
         assert!(gone[0].starts_with("green-suv is partly outside the image"));
-        // A crate lifted over a parked vehicle does not touch it.
+        // A crate lifted over a parked vehicle does not touch it; one parked in it does.
         let over = build(&["crate=-0.15,0.12,0.3;0.05,0.12,0.3"], &["crate@0,0"]);
-        assert!(over.collisions(24).is_empty());
+        assert!(over.collisions(24).is_empty(), "{:?}", over.collisions(24));
+        let inside = build(&[], &["barrel@-0.3,0.1"]);
+        assert_eq!(inside.collisions(24).len(), 1);
     }
 }

@@ -3,7 +3,7 @@
 use anyhow::Context;
 use clap::{Args as ClapArgs, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use scene::toycars::{generate, Preset, ToycarsConfig};
+use scene::toycars::{generate, AddSpec, Preset, RouteSpec, ToycarsConfig};
 use std::path::PathBuf;
 
 /// Generate a built-in synthetic scene with ground truth (toycars).
@@ -16,7 +16,7 @@ pub struct Args {
 #[derive(Subcommand)]
 enum What {
     /// Three toy vehicles on a textured mat, one driving, one moving camera (D-NeRF layout,
-    /// plus masks/ and objects.json).
+    /// plus masks/ and objects.json); --route and --add make other motions and props.
     Toycars(ToycarsArgs),
 }
 
@@ -48,9 +48,45 @@ struct ToycarsArgs {
     no_shadows: bool,
     /// Fraction of its ~2.6-unit route the moving vehicle covers in the 6 s, in (0, 1].
     /// 1 is the full drive (with a left turn); e.g. 0.25 drives ~0.65 units straight, a
-    /// motion deformable 3DGS can follow.
+    /// motion deformable 3DGS can follow. With --route it applies to every moving object
+    /// (the fraction of its own route).
     #[arg(long, default_value_t = 1.0)]
     drive: f32,
+    /// Move an object along waypoints: SPEC = [NAME=]P;P;..., P = x,y[,z][@yaw[,pitch,roll]]
+    /// (repeatable, one per object; quote it, `;` is special to the shell).
+    ///
+    /// At least 2 waypoints, in world units (the mat is [-1.25, 1.25]², z up) and degrees.
+    /// NAME is an object's name in objects.json (white-suv, yellow-sedan, green-suv, or an
+    /// --add'ed crate, crate-2, barrel, ...); without NAME= the preset's moving vehicle.
+    /// The object passes through every waypoint at constant speed along a smooth
+    /// (centripetal Catmull-Rom) curve over the 6 s. z is the height of its origin above
+    /// the ground (default 0; z > 0 leaves the ground). It heads along the curve unless
+    /// waypoints give @yaw: then yaw, pitch and roll (default 0; right-handed about the
+    /// object's z, y, x axes: positive pitch lowers the nose, positive roll raises the
+    /// left side) are interpolated between those waypoints the shortest way round (add a
+    /// waypoint to turn 180° or more). Its box must stay inside [-1.3, 1.3]³ at every frame;
+    /// a warning says when an object leaves the image or meets another one.
+    ///
+    /// Example (two cars crossing): --route '0.95,-0.35;-0.9,-0.35' --route 'green-suv=0.45,0.95;0.45,-0.55'
+    #[arg(long = "route", value_name = "SPEC", allow_hyphen_values = true)]
+    routes: Vec<RouteSpec>,
+    /// Park a rigid prop: KIND@x,y[,yaw], KIND crate or barrel, yaw in degrees
+    /// (repeatable).
+    ///
+    /// crate: a wooden toy crate (0.30 long, 0.22 wide, 0.20 high) with different markings
+    /// on every face; barrel: an upright red barrel (0.19 across, 0.24 high) with a band,
+    /// a label and a marked lid. Props stand on the ground with their centre at (x, y),
+    /// get the next mask IDs (3, 4, ...) and the names crate, crate-2, ..., barrel, ...;
+    /// move one with --route crate=....
+    ///
+    /// Example (a crate sliding and turning 180° while the preset's car drives past):
+    /// --add crate@0.25,-0.25 --route 'crate=0.25,-0.25@0;0.3,0.15@90;0.3,0.5@180'
+    #[arg(
+        long = "add",
+        value_name = "KIND@x,y[,yaw]",
+        allow_hyphen_values = true
+    )]
+    adds: Vec<AddSpec>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -69,6 +105,8 @@ fn toycars(a: ToycarsArgs) -> anyhow::Result<()> {
         supersample: !a.no_antialias,
         shadows: !a.no_shadows,
         drive: a.drive,
+        routes: a.routes,
+        adds: a.adds,
     };
     let bar = ProgressBar::new(cfg.frames as u64);
     bar.set_style(

@@ -1,5 +1,5 @@
 //! Ray–primitive intersections for the toycars ray caster: axis-aligned boxes (slab
-//! test, Kay & Kajiya) and wheels as finite cylinders around the local y axis.
+//! test, Kay & Kajiya) and finite cylinders: wheels around the local y axis, drums around z.
 
 pub type V3 = [f32; 3];
 
@@ -128,6 +128,24 @@ pub fn hit_wheel(
     best
 }
 
+/// [`hit_wheel`] for a cylinder around the z axis (`half_h` along z): the same test with
+/// y and z swapped.
+pub fn hit_drum(
+    ray: &Ray,
+    center: V3,
+    radius: f32,
+    half_h: f32,
+    t_min: f32,
+    t_max: f32,
+) -> Option<(f32, V3)> {
+    let swap = |v: V3| [v[0], v[2], v[1]];
+    let r = Ray {
+        origin: swap(ray.origin),
+        dir: swap(ray.dir),
+    };
+    hit_wheel(&r, swap(center), radius, half_h, t_min, t_max).map(|(t, n)| (t, swap(n)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -149,5 +167,9 @@ mod tests {
         };
         let (t, n) = hit_wheel(&side, [0.0; 3], 0.5, 0.1, 0.0, f32::MAX).unwrap();
         assert!((t - 4.9).abs() < 1e-6 && n == [0.0, 1.0, 0.0]);
+        let (t, n) = hit_drum(&ray, [0.0; 3], 0.5, 0.1, 0.0, f32::MAX).unwrap();
+        assert!((t - 4.9).abs() < 1e-6 && n == [0.0, 0.0, 1.0]);
+        let (t, n) = hit_drum(&side, [0.0; 3], 0.5, 0.1, 0.0, f32::MAX).unwrap();
+        assert!((t - 4.5).abs() < 1e-6 && (n[1] - 1.0).abs() < 1e-6);
     }
 }

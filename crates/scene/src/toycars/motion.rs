@@ -1,5 +1,6 @@
-//! Where things are at time t ∈ [0, 1] (6 s): the vehicles' poses (two parked, one
-//! driving a curve with a left turn) and the camera sliding along an arc.
+//! Where things are at time t ∈ [0, 1] (6 s): the objects' poses (in the presets two
+//! parked, one driving a curve with a left turn; `--route` adds others, see `route`) and
+//! the camera sliding along an arc.
 //!
 //! Scale: everything stays inside [−1.3, 1.3]³ (the ground mat is [−1.25, 1.25]² at z = 0),
 //! where the trainer seeds its random initial points as Deformable-3DGS does for
@@ -8,43 +9,123 @@
 //! monocular setting in which deformable 3DGS struggles (paper, Sec. 1 and 4).
 
 use super::geometry::{normalize, sub, V3};
-use super::vehicles::{green_suv, white_suv, yellow_sedan, Vehicle};
+use super::model::Model;
+use super::route::Route;
+use super::vehicles::{green_suv, white_suv, yellow_sedan};
 use super::Preset;
 
 /// Half side of the square ground mat.
 pub const GROUND_HALF: f32 = 1.25;
 
-/// The three vehicles in mask-ID order (0 white SUV, 1 yellow sedan, 2 green SUV) and
-/// which one moves.
+/// Where an object is at one instant: its origin (z = height above the ground) and its
+/// orientation as right-handed rotations about its own axes, applied yaw (z), then pitch
+/// (y, positive lowers the nose), then roll (x, positive raises the left side).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pose {
+    pub pos: V3,
+    pub yaw: f32,
+    pub pitch: f32,
+    pub roll: f32,
+}
+
+impl Pose {
+    /// On the ground at `(x, y)`, heading `yaw`.
+    pub fn flat(x: f32, y: f32, yaw: f32) -> Self {
+        Self {
+            pos: [x, y, 0.0],
+            yaw,
+            pitch: 0.0,
+            roll: 0.0,
+        }
+    }
+
+    /// Row-major local→world matrix `[Rz(yaw)·Ry(pitch)·Rx(roll) | pos]`: what the ray
+    /// caster renders with and `objects.json` records.
+    pub fn matrix(&self) -> [[f32; 4]; 4] {
+        let [x, y, z] = self.pos;
+        let (sy, cy) = self.yaw.sin_cos();
+        if self.pitch == 0.0 && self.roll == 0.0 {
+            // Yaw only: exactly the matrix the presets have always written (the general
+            // product would turn some zeros into −0).
+            return [
+                [cy, -sy, 0.0, x],
+                [sy, cy, 0.0, y],
+                [0.0, 0.0, 1.0, z],
+                [0.0, 0.0, 0.0, 1.0],
+            ];
+        }
+        let (sp, cp) = self.pitch.sin_cos();
+        let (sr, cr) = self.roll.sin_cos();
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr, x],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr, y],
+            [-sp, cp * sr, cp * cr, z],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    }
+}
+
+/// How one object moves.
+pub enum Motion {
+    Parked(Pose),
+    /// The preset's drive: the first `drive` of [`path`].
+    Drive,
+    /// A `--route`, also travelled to its `drive` fraction.
+    Route(Route),
+}
+
+/// The objects in mask-ID order (0 white SUV, 1 yellow sedan, 2 green SUV, then any
+/// `--add`ed props) and how each moves.
 pub struct Layout {
-    pub vehicles: Vec<Vehicle>,
-    pub moving: usize,
-    /// Fraction of [`path`] driven between t = 0 and t = 1.
+    pub models: Vec<Model>,
+    pub motions: Vec<Motion>,
+    /// The preset's moving vehicle (what an unnamed `--route` moves).
+    pub driver: usize,
+    /// Fraction of its route each moving object covers between t = 0 and t = 1.
     pub drive: f32,
 }
 
 impl Layout {
+    /// A preset as the paper has it: the moving vehicle drives [`path`], the others take
+    /// the two parking spots in ID order.
     pub fn new(preset: Preset, drive: f32) -> Self {
         let moving = match preset {
             Preset::Scene1 => 0,
             Preset::Scene2 => 1,
         };
+        const SPOTS: [(f32, f32, f32); 2] = [(-0.15, 0.12, 0.35), (-0.62, 0.62, -1.05)];
+        let mut spots = SPOTS.iter();
+        let motions = (0..3)
+            .map(|i| match i == moving {
+                true => Motion::Drive,
+                false => {
+                    let &(x, y, yaw) = spots.next().expect("two parked vehicles");
+                    Motion::Parked(Pose::flat(x, y, yaw))
+                }
+            })
+            .collect();
         Self {
-            vehicles: vec![white_suv(), yellow_sedan(), green_suv()],
-            moving,
+            models: vec![white_suv(), yellow_sedan(), green_suv()],
+            motions,
+            driver: moving,
             drive,
         }
     }
 
-    /// `(x, y, yaw)` of vehicle `i` at time `t`: the moving one follows the first `drive`
-    /// of [`path`] at constant speed, the others take the two parking spots in ID order.
-    pub fn pose(&self, i: usize, t: f32) -> (f32, f32, f32) {
-        if i == self.moving {
-            return path(t * self.drive);
+    /// Pose of object `i` at time `t`.
+    pub fn pose(&self, i: usize, t: f32) -> Pose {
+        match &self.motions[i] {
+            Motion::Parked(p) => *p,
+            Motion::Drive => {
+                let (x, y, yaw) = path(t * self.drive);
+                Pose::flat(x, y, yaw)
+            }
+            Motion::Route(r) => r.pose(t * self.drive),
         }
-        const SPOTS: [(f32, f32, f32); 2] = [(-0.15, 0.12, 0.35), (-0.62, 0.62, -1.05)];
-        let slot = (0..i).filter(|&k| k != self.moving).count();
-        SPOTS[slot]
+    }
+
+    pub fn is_moving(&self, i: usize) -> bool {
+        !matches!(self.motions[i], Motion::Parked(_))
     }
 }
 
@@ -153,12 +234,55 @@ mod tests {
             assert_eq!(quarter.pose(1, t), full.pose(1, t));
             assert_eq!(quarter.pose(2, t), full.pose(2, t));
         }
-        let ((x0, y0, _), (x1, y1, _)) = (quarter.pose(0, 0.0), quarter.pose(0, 1.0));
+        let ([x0, y0, _], [x1, y1, _]) = (quarter.pose(0, 0.0).pos, quarter.pose(0, 1.0).pos);
         let covered = (x1 - x0).hypot(y1 - y0);
         assert!(
             covered > 0.5 && covered < 0.8,
             "quarter drive covers {covered}"
         );
+    }
+
+    /// Yaw-only poses give the presets' matrix exactly; tilted ones a proper rotation
+    /// with the documented signs.
+    #[test]
+    fn pose_matrices() {
+        let (s, c) = 0.7f32.sin_cos();
+        let old = [
+            [c, -s, 0.0, 0.3],
+            [s, c, 0.0, -0.2],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ];
+        assert_eq!(Pose::flat(0.3, -0.2, 0.7).matrix(), old);
+        let p = Pose {
+            pos: [0.1, 0.2, 0.3],
+            yaw: 0.4,
+            pitch: 0.25,
+            roll: -0.6,
+        };
+        let m = p.matrix();
+        for a in 0..3 {
+            for b in 0..3 {
+                let d: f32 = (0..3).map(|k| m[k][a] * m[k][b]).sum();
+                assert!((d - f32::from(a == b)).abs() < 1e-6);
+            }
+        }
+        assert_eq!([m[0][3], m[1][3], m[2][3]], p.pos);
+        let nose = Pose {
+            yaw: 0.0,
+            roll: 0.0,
+            ..p
+        }
+        .matrix();
+        assert!(nose[2][0] < 0.0, "positive pitch lowers the nose");
+        let side = Pose {
+            yaw: 0.0,
+            pitch: 0.0,
+            roll: 0.3,
+            ..p
+        }
+        .matrix();
+        assert!(side[2][1] > 0.0, "positive roll raises the left side");
     }
 
     #[test]

@@ -1,11 +1,13 @@
-//! The toycars ray caster: primary rays against the ground mat and the posed vehicles,
+//! The toycars ray caster: primary rays against the ground mat and the posed models,
 //! Lambert + Blinn-Phong shading under one sun with hard shadows, 4 rotated-grid
 //! supersamples per pixel, rows in parallel (rayon).
 
-use super::geometry::{add, dot, hit_box, hit_wheel, normalize, overlaps_box, scale, sub, Ray, V3};
+use super::geometry::{
+    add, dot, hit_box, hit_drum, hit_wheel, normalize, overlaps_box, scale, sub, Ray, V3,
+};
+use super::model::{albedo, Material, Model, Shape};
 use super::motion::GROUND_HALF;
 use super::texture;
-use super::vehicles::{albedo, Material, Shape, Vehicle};
 use crate::MASK_BACKGROUND;
 use rayon::prelude::*;
 
@@ -18,33 +20,41 @@ const RGSS: [[f32; 2]; 4] = [
     [-0.375, -0.125],
 ];
 
-/// A vehicle placed in the world at one instant: yaw about z, then translation.
+/// A model placed in the world at one instant by its row-major local→world matrix (the
+/// one `objects.json` records): `world = R · local + pos`.
 pub struct Placed<'a> {
-    pub vehicle: &'a Vehicle,
+    pub model: &'a Model,
     pub id: u8,
-    pub cos: f32,
-    pub sin: f32,
-    pub pos: [f32; 2],
+    pub rot: [V3; 3],
+    pub pos: V3,
 }
 
-impl Placed<'_> {
+impl<'a> Placed<'a> {
+    pub fn new(model: &'a Model, id: u8, m: &[[f32; 4]; 4]) -> Self {
+        Self {
+            model,
+            id,
+            rot: [0, 1, 2].map(|r| [m[r][0], m[r][1], m[r][2]]),
+            pos: [m[0][3], m[1][3], m[2][3]],
+        }
+    }
+
+    /// `Rᵀ · v` (the inverse rotation).
+    fn unrotate(&self, v: V3) -> V3 {
+        let r = &self.rot;
+        [0, 1, 2].map(|k| r[0][k] * v[0] + r[1][k] * v[1] + r[2][k] * v[2])
+    }
+
     fn to_local(&self, r: &Ray) -> Ray {
-        let (x, y) = (r.origin[0] - self.pos[0], r.origin[1] - self.pos[1]);
-        let rot = |a: f32, b: f32| [self.cos * a + self.sin * b, -self.sin * a + self.cos * b];
-        let o = rot(x, y);
-        let d = rot(r.dir[0], r.dir[1]);
         Ray {
-            origin: [o[0], o[1], r.origin[2]],
-            dir: [d[0], d[1], r.dir[2]],
+            origin: self.unrotate(sub(r.origin, self.pos)),
+            dir: self.unrotate(r.dir),
         }
     }
 
     fn normal_to_world(&self, n: V3) -> V3 {
-        [
-            self.cos * n[0] - self.sin * n[1],
-            self.sin * n[0] + self.cos * n[1],
-            n[2],
-        ]
+        self.rot
+            .map(|row| row[0] * n[0] + row[1] * n[1] + row[2] * n[2])
     }
 }
 
@@ -65,8 +75,8 @@ struct Hit {
     spec: f32,
 }
 
-/// Nearest part of one vehicle hit by a local-frame ray: `(t, normal, part index)`.
-fn hit_vehicle(v: &Vehicle, r: &Ray, t_max: f32) -> Option<(f32, V3, usize)> {
+/// Nearest part of one model hit by a local-frame ray: `(t, normal, part index)`.
+fn hit_model(v: &Model, r: &Ray, t_max: f32) -> Option<(f32, V3, usize)> {
     if !overlaps_box(r, v.bbox_lo, v.bbox_hi, 1e-4, t_max) {
         return None;
     }
@@ -80,6 +90,11 @@ fn hit_vehicle(v: &Vehicle, r: &Ray, t_max: f32) -> Option<(f32, V3, usize)> {
                 radius,
                 half_w,
             } => hit_wheel(r, center, radius, half_w, 1e-4, limit),
+            Shape::Drum {
+                center,
+                radius,
+                half_h,
+            } => hit_drum(r, center, radius, half_h, 1e-4, limit),
         };
         if let Some((t, n)) = h {
             best = Some((t, n, i));
@@ -94,9 +109,9 @@ impl World<'_> {
         let mut t_max = f32::MAX;
         for obj in &self.objects {
             let local = obj.to_local(ray);
-            if let Some((t, n, i)) = hit_vehicle(obj.vehicle, &local, t_max) {
+            if let Some((t, n, i)) = hit_model(obj.model, &local, t_max) {
                 t_max = t;
-                let part = &obj.vehicle.parts[i];
+                let part = &obj.model.parts[i];
                 let mut p = local.at(t);
                 if let (Material::Tire, Shape::Wheel { center, .. }) = (part.material, part.shape) {
                     p = sub(p, center);
@@ -135,7 +150,7 @@ impl World<'_> {
         };
         self.objects
             .iter()
-            .any(|o| hit_vehicle(o.vehicle, &o.to_local(&ray), f32::MAX).is_some())
+            .any(|o| hit_model(o.model, &o.to_local(&ray), f32::MAX).is_some())
     }
 
     /// Colour of a hit seen along `dir`.

@@ -3,21 +3,8 @@
 //! the ground under the vehicle's centre.
 
 use super::geometry::V3;
+use super::model::{Material, Model, Part, Shape};
 use super::texture::{checker, lines, mix, noise};
-
-#[derive(Clone, Copy, Debug)]
-pub enum Shape {
-    Box {
-        lo: V3,
-        hi: V3,
-    },
-    /// Cylinder around the local y axis.
-    Wheel {
-        center: V3,
-        radius: f32,
-        half_w: f32,
-    },
-}
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Livery {
@@ -27,29 +14,6 @@ pub enum Livery {
     Pinstripe,
     /// Green SUV: mottled camouflage and diagonal door hatching.
     Camo,
-}
-
-#[derive(Clone, Copy, Debug)]
-pub enum Material {
-    Paint { base: V3, livery: Livery },
-    Glass,
-    Tire,
-    Solid(V3),
-}
-
-#[derive(Clone, Copy, Debug)]
-pub struct Part {
-    pub shape: Shape,
-    pub material: Material,
-}
-
-#[derive(Clone, Debug)]
-pub struct Vehicle {
-    pub name: &'static str,
-    pub prompt: &'static str,
-    pub parts: Vec<Part>,
-    pub bbox_lo: V3,
-    pub bbox_hi: V3,
 }
 
 /// Body proportions shared by both body styles.
@@ -63,7 +27,7 @@ struct Dims {
     wheel_r: f32,
 }
 
-pub fn white_suv() -> Vehicle {
+pub fn white_suv() -> Model {
     let d = Dims {
         half_len: 0.28,
         half_wid: 0.12,
@@ -82,7 +46,7 @@ pub fn white_suv() -> Vehicle {
     )
 }
 
-pub fn yellow_sedan() -> Vehicle {
+pub fn yellow_sedan() -> Model {
     let d = Dims {
         half_len: 0.26,
         half_wid: 0.115,
@@ -101,7 +65,7 @@ pub fn yellow_sedan() -> Vehicle {
     )
 }
 
-pub fn green_suv() -> Vehicle {
+pub fn green_suv() -> Model {
     let d = Dims {
         half_len: 0.28,
         half_wid: 0.12,
@@ -120,7 +84,7 @@ pub fn green_suv() -> Vehicle {
     )
 }
 
-fn build(name: &'static str, prompt: &'static str, d: &Dims, base: V3, livery: Livery) -> Vehicle {
+fn build(name: &'static str, prompt: &'static str, d: &Dims, base: V3, livery: Livery) -> Model {
     let paint = Material::Paint { base, livery };
     let (hl, hw) = (d.half_len, d.half_wid);
     let cw = hw - 0.015;
@@ -155,14 +119,7 @@ fn build(name: &'static str, prompt: &'static str, d: &Dims, base: V3, livery: L
             });
         }
     }
-    let (bbox_lo, bbox_hi) = bounds(&parts);
-    Vehicle {
-        name,
-        prompt,
-        parts,
-        bbox_lo,
-        bbox_hi,
-    }
+    Model::new(name, prompt, parts)
 }
 
 /// Thin glass panels standing 6 mm proud of the cabin: windshield, rear, two per side.
@@ -229,43 +186,9 @@ fn trim(d: &Dims) -> Vec<Part> {
     v
 }
 
-fn bounds(parts: &[Part]) -> (V3, V3) {
-    let mut lo = [f32::MAX; 3];
-    let mut hi = [f32::MIN; 3];
-    for p in parts {
-        let (a, b) = match p.shape {
-            Shape::Box { lo, hi } => (lo, hi),
-            Shape::Wheel {
-                center: c,
-                radius: r,
-                half_w: w,
-            } => (
-                [c[0] - r, c[1] - w, c[2] - r],
-                [c[0] + r, c[1] + w, c[2] + r],
-            ),
-        };
-        for k in 0..3 {
-            lo[k] = lo[k].min(a[k]);
-            hi[k] = hi[k].max(b[k]);
-        }
-    }
-    (lo, hi)
-}
-
-/// Albedo and specular weight of a vehicle surface at local point `p` (relative to the
-/// wheel centre for tyres) with normal `n`.
-pub fn albedo(m: &Material, p: V3, n: V3, key: u64) -> (V3, f32) {
-    match *m {
-        Material::Paint { base, livery } => (livery_color(base, livery, p, n, key), 0.35),
-        Material::Glass => ([0.10, 0.14, 0.20], 0.8),
-        Material::Solid(c) => (c, 0.2),
-        Material::Tire => (tire(p, n), 0.05),
-    }
-}
-
 /// Tyre colour at `q`, relative to the wheel centre: a light hub with five spokes on the
 /// flanks, fine grooves on the tread.
-fn tire(q: V3, n: V3) -> V3 {
+pub fn tire(q: V3, n: V3) -> V3 {
     let ang = q[2].atan2(q[0]);
     if n[1].abs() > 0.5 {
         let r = (q[0] * q[0] + q[2] * q[2]).sqrt();
@@ -282,7 +205,7 @@ fn tire(q: V3, n: V3) -> V3 {
     }
 }
 
-fn livery_color(base: V3, livery: Livery, p: V3, n: V3, key: u64) -> V3 {
+pub fn livery_color(base: V3, livery: Livery, p: V3, n: V3, key: u64) -> V3 {
     let top = n[2] > 0.5;
     let side = n[1].abs() > 0.5;
     let front = n[0] > 0.5;

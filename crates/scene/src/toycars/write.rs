@@ -1,7 +1,7 @@
 //! Writing a toycars scene: per-frame RGBA image and mask, then `transforms_*.json`
 //! (D-NeRF: camera-to-world in OpenGL axes) and `objects.json`.
 
-use super::motion::{camera_pose, Layout, CAMERA_ANGLE_X};
+use super::motion::{camera_pose, Layout, Motion, CAMERA_ANGLE_X};
 use super::render::{render, Placed, RayCamera, World};
 use super::{frame_key, ToycarsConfig};
 use crate::objects::{ObjectFrame, ObjectInfo, ObjectsFile};
@@ -41,17 +41,6 @@ pub fn splat_camera(width: u32, height: u32, t: f32) -> splat::Camera {
     }
 }
 
-/// Row-major local→world matrix of a `(x, y, yaw)` pose.
-fn pose_matrix((x, y, yaw): (f32, f32, f32)) -> [[f32; 4]; 4] {
-    let (s, c) = yaw.sin_cos();
-    [
-        [c, -s, 0.0, x],
-        [s, c, 0.0, y],
-        [0.0, 0.0, 1.0, 0.0],
-        [0.0, 0.0, 0.0, 1.0],
-    ]
-}
-
 pub fn render_frame(
     cfg: &ToycarsConfig,
     layout: &Layout,
@@ -60,21 +49,16 @@ pub fn render_frame(
     out_dir: &Path,
     index: usize,
 ) -> Result<FrameRecord, SceneError> {
-    let poses: Vec<(f32, f32, f32)> = (0..layout.vehicles.len())
-        .map(|i| layout.pose(i, t))
+    // One matrix per object, used both to render and as the recorded ground truth.
+    let poses: Vec<[[f32; 4]; 4]> = (0..layout.models.len())
+        .map(|i| layout.pose(i, t).matrix())
         .collect();
     let objects = layout
-        .vehicles
+        .models
         .iter()
         .zip(&poses)
         .enumerate()
-        .map(|(i, (v, p))| Placed {
-            vehicle: v,
-            id: i as u8,
-            cos: p.2.cos(),
-            sin: p.2.sin(),
-            pos: [p.0, p.1],
-        })
+        .map(|(i, (v, m))| Placed::new(v, i as u8, m))
         .collect();
     let sun = super::geometry::normalize([0.45, -0.55, 0.85]);
     let world = World {
@@ -111,7 +95,7 @@ pub fn render_frame(
     Ok(FrameRecord {
         index,
         time: t,
-        object_to_world: poses.into_iter().map(pose_matrix).collect(),
+        object_to_world: poses,
     })
 }
 
@@ -149,14 +133,14 @@ pub fn write_metadata(
         crate::io::write_json(&out.join(format!("transforms_{split}.json")), &doc)?;
     }
     let objects = layout
-        .vehicles
+        .models
         .iter()
         .enumerate()
         .map(|(i, v)| ObjectInfo {
             id: i as u8,
-            name: v.name.to_string(),
+            name: v.name.clone(),
             prompt: v.prompt.to_string(),
-            moving: i == layout.moving,
+            moving: layout.is_moving(i),
             bbox_local: [v.bbox_lo, v.bbox_hi],
         })
         .collect();
@@ -168,17 +152,57 @@ pub fn write_metadata(
             object_to_world: fr.object_to_world.clone(),
         })
         .collect();
-    let mut extra = serde_json::Map::new();
-    extra.insert(
-        "generator".into(),
-        json!({"name": "semdynreg synth toycars", "preset": cfg.preset.name(), "seed": cfg.seed,
+    let mut generator = json!({"name": "semdynreg synth toycars", "preset": cfg.preset.name(), "seed": cfg.seed,
                "drive": cfg.drive, "width": cfg.width, "height": cfg.height, "frames": cfg.frames, "duration_s": 6.0,
-               "mask_background": crate::MASK_BACKGROUND, "up_axis": "+z"}),
-    );
+               "mask_background": crate::MASK_BACKGROUND, "up_axis": "+z"});
+    // Only scenes that use them get the keys: the presets' files stay byte-identical.
+    if !cfg.routes.is_empty() {
+        generator["routes"] = routes_record(cfg, layout)?;
+    }
+    if !cfg.adds.is_empty() {
+        generator["adds"] = adds_record(cfg, layout);
+    }
+    let mut extra = serde_json::Map::new();
+    extra.insert("generator".into(), generator);
     ObjectsFile {
         objects,
         frames,
         extra,
     }
     .save(&out.join("objects.json"))
+}
+
+/// `generator.routes`: per `--route`, the object it moves, its text and its length.
+fn routes_record(cfg: &ToycarsConfig, layout: &Layout) -> Result<serde_json::Value, SceneError> {
+    let mut out = Vec::new();
+    for spec in &cfg.routes {
+        let i = layout.route_target(spec)?;
+        let length = match &layout.motions[i] {
+            Motion::Route(r) => r.length(),
+            _ => unreachable!("a routed object moves along its route"),
+        };
+        let waypoints: Vec<_> = spec
+            .waypoints
+            .iter()
+            .map(|w| json!({"pos": w.pos, "angles_deg": w.angles_deg}))
+            .collect();
+        out.push(
+            json!({"object": layout.models[i].name, "id": i, "spec": spec.text,
+                        "length": length, "waypoints": waypoints}),
+        );
+    }
+    Ok(serde_json::Value::Array(out))
+}
+
+/// `generator.adds`: per `--add`, the object it created and where.
+fn adds_record(cfg: &ToycarsConfig, layout: &Layout) -> serde_json::Value {
+    let first = layout.models.len() - cfg.adds.len();
+    cfg.adds
+        .iter()
+        .enumerate()
+        .map(|(k, a)| {
+            json!({"kind": a.kind.name(), "name": layout.models[first + k].name, "id": first + k,
+                              "spec": a.text, "x": a.x, "y": a.y, "yaw_deg": a.yaw_deg})
+        })
+        .collect()
 }

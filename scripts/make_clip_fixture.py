@@ -139,9 +139,10 @@ def reference(model, images, tokens):
 
 
 def preprocess_case():
-    """A 40×30 image with an L-shaped mask, cropped and padded as DESIGN.md item 2, then
-    CLIP's own eval transform (bicubic resize, centre crop, normalize) at 64 px to keep the
-    fixture small (the Rust side takes the side length as a parameter)."""
+    """A 40×30 image with an L-shaped mask, cropped and padded as docs/architecture.md
+    ("SemDynReg" item 2) describes, then CLIP's own eval transform (bicubic resize, centre
+    crop, normalize) at 64 px to keep the fixture small (the Rust side takes the side
+    length as a parameter)."""
     rng = np.random.default_rng(7)
     img = rng.integers(0, 256, size=(30, 40, 3), dtype=np.uint8)
     mask = np.zeros((30, 40), dtype=bool)

@@ -6,10 +6,12 @@ use npyz::WriterBuilder;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+// The rasterizer's reference cases, found by the helper splat's own tests use.
+#[path = "../../splat/tests/common/fixtures.rs"]
+mod fixtures;
+
 fn case(stem: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/reference/cases")
-        .join(format!("{stem}.npz"))
+    fixtures::cases_dir().join(format!("{stem}.npz"))
 }
 
 type Arrays = Vec<(String, Vec<u64>, Vec<f64>)>;

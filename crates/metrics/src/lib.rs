@@ -1,6 +1,6 @@
-//! Image quality metrics for SemDynReg (DESIGN.md, issue 4): PSNR, SSIM (3DGS variant with
-//! its gradient for the training loss, and the scikit-image variant), LPIPS, and per-object
-//! crops. Images are RGB, HWC interleaved `f32` in [0, 1].
+//! Image quality metrics for SemDynReg (docs/architecture.md, issue 4): PSNR, SSIM (3DGS
+//! variant with its gradient for the training loss, and the scikit-image variant), LPIPS,
+//! and per-object crops. Images are RGB, HWC interleaved `f32` in [0, 1].
 
 pub mod crop;
 pub mod eval;

@@ -7,15 +7,15 @@
 //! independent candle `conv2d` implementation gave (0.72188, 0.13757), which pins the
 //! convolution, pooling and normalization code far tighter than three decimals do.
 //! Needs the real weights (`scripts/fetch_lpips.sh DIR`, `SEMDYNREG_WEIGHTS=DIR`) and
-//! `../shared/reference/lpips`; skips with a printed reason when either is absent.
+//! the example images in `tests/fixtures/lpips` (README there: source and licence); skips
+//! with a printed reason when the weights are absent (the images are always there).
 
 use metrics::{load_rgb, Lpips, LpipsNet, RgbImage};
 use std::path::PathBuf;
 
+/// The LPIPS project's example images, kept in this crate.
 fn reference_dir() -> PathBuf {
-    // crates/metrics → repository root → ../shared beside it.
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-    root.join("../shared/reference/lpips")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/lpips")
 }
 
 fn model(net: LpipsNet) -> Option<Lpips> {
@@ -28,16 +28,14 @@ fn model(net: LpipsNet) -> Option<Lpips> {
     }
 }
 
-fn images() -> Option<[RgbImage; 3]> {
+/// The three images; they are part of the repository, so a missing one is a failure.
+fn images() -> [RgbImage; 3] {
     let dir = reference_dir();
-    let load = |n: &str| load_rgb(&dir.join(n));
-    match (load("ex_ref.png"), load("ex_p0.png"), load("ex_p1.png")) {
-        (Ok(r), Ok(p0), Ok(p1)) => Some([r, p0, p1]),
-        (Err(e), _, _) | (_, Err(e), _) | (_, _, Err(e)) => {
-            eprintln!("SKIPPED: reference images unavailable: {e}");
-            None
-        }
-    }
+    let load = |n: &str| {
+        let path = dir.join(n);
+        load_rgb(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+    };
+    [load("ex_ref.png"), load("ex_p0.png"), load("ex_p1.png")]
 }
 
 fn dist(m: &Lpips, a: &RgbImage, b: &RgbImage) -> f32 {
@@ -46,7 +44,8 @@ fn dist(m: &Lpips, a: &RgbImage, b: &RgbImage) -> f32 {
 
 #[test]
 fn alex_matches_official_example_values() {
-    let (Some(m), Some([r, p0, p1])) = (model(LpipsNet::Alex), images()) else {
+    let [r, p0, p1] = images();
+    let Some(m) = model(LpipsNet::Alex) else {
         return;
     };
     let d0 = dist(&m, &r, &p0);
@@ -64,7 +63,8 @@ fn alex_matches_official_example_values() {
 
 #[test]
 fn vgg_matches_published_pytorch_values() {
-    let (Some(m), Some([r, p0, p1])) = (model(LpipsNet::Vgg), images()) else {
+    let [r, p0, p1] = images();
+    let Some(m) = model(LpipsNet::Vgg) else {
         return;
     };
     let d0 = dist(&m, &r, &p0);

@@ -2,7 +2,7 @@
 //!
 //! Follows Deformable-3DGS `readCamerasFromTransforms`: `transform_matrix` is
 //! camera-to-world in OpenGL axes (y up, z backward); negating its y and z columns gives
-//! OpenCV axes, and its inverse is the world-to-camera `viewmat` (DESIGN.md).
+//! OpenCV axes, and its inverse is the world-to-camera `viewmat` (docs/architecture.md).
 //! Intrinsics: `fl_x fl_y cx cy` when present, else `fx = fy = W / (2·tan(camera_angle_x/2))`
 //! and the principal point at the image centre.
 
@@ -194,7 +194,7 @@ fn parse_matrix(json_path: &Path, index: usize, rows: &[Vec<f64>]) -> Result<Mat
     Ok(m)
 }
 
-/// OpenGL camera-to-world → OpenCV world-to-camera (DESIGN.md conventions).
+/// OpenGL camera-to-world → OpenCV world-to-camera (docs/architecture.md conventions).
 pub(crate) fn opengl_c2w_to_viewmat(c2w: &Mat4) -> Option<[[f32; 4]; 4]> {
     let mut m = *c2w;
     for row in m.iter_mut().take(3) {

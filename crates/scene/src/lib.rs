@@ -1,4 +1,4 @@
-//! `scene`: cameras, data sets and their files (DESIGN.md, "Data sets").
+//! `scene`: cameras, data sets and their files (docs/architecture.md, "On disk").
 //!
 //! - [`load_dataset`] reads D-NeRF/Blender (`transforms_*.json`) and Nerfies/HyperNeRF
 //!   (`dataset.json`) scenes into a [`Dataset`] of [`Frame`]s with [`splat::Camera`]s in the

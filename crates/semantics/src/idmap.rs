@@ -1,5 +1,5 @@
 //! Object-ID maps: paint per-mask object IDs into an 8-bit image (255 = background, as on
-//! disk, DESIGN.md item 3), and a colour preview of such a map.
+//! disk, docs/architecture.md item 3), and a colour preview of such a map.
 
 use thiserror::Error;
 
@@ -24,9 +24,9 @@ pub enum IdMapError {
 
 /// Paints `ids[k]` into every pixel of `masks[k]` (row-major `width × height` booleans).
 ///
-/// The masks are expected to be non-overlapping (SAM stage, DESIGN.md item 1); should two
-/// overlap anyway, the later mask wins the pixel. Masks with `None` and pixels no mask covers
-/// stay [`BACKGROUND`].
+/// The masks are expected to be non-overlapping (SAM stage, docs/architecture.md item 1);
+/// should two overlap anyway, the later mask wins the pixel. Masks with `None` and pixels
+/// no mask covers stay [`BACKGROUND`].
 pub fn paint<M: AsRef<[bool]>>(
     masks: &[M],
     ids: &[Option<u8>],

@@ -1,4 +1,4 @@
-//! `semantics` (see DESIGN.md).
+//! `semantics` (see docs/architecture.md).
 pub mod automask;
 pub mod clip;
 pub mod idmap;

@@ -1,9 +1,10 @@
-//! Dictionary relevance and per-mask object IDs (paper Sec. 3.1, DESIGN.md "SemDynReg" item 3).
+//! Dictionary relevance and per-mask object IDs (paper Sec. 3.1, docs/architecture.md
+//! "SemDynReg" item 3).
 //!
 //! The paper writes the relevance of prompt `i` for a feature `F(v)` as
 //! `exp(F·eᵢ) / (exp(F·eᵢ) + exp(F·e_c))`, minimized over the canonical phrases `c`.
 //! Following LERF (Kerr et al. 2023, Sec. 3.3) and LangSplat, the dot products are scaled
-//! by a temperature of 10 before the pairwise softmax; DESIGN.md fixes that constant:
+//! by a temperature of 10 before the pairwise softmax, a constant the paper omits:
 //! `rᵢ(v) = min_c softmax(10·[F(v)·eᵢ, F(v)·e_c])₀`.
 //! The masks handed to us are non-overlapping and every pixel of a mask shares the mask's
 //! feature, so relevance is computed once per mask and painted afterwards (`crate::idmap`).
@@ -13,7 +14,7 @@ use thiserror::Error;
 /// LERF's softmax temperature (multiplies the cosine similarities).
 pub const LERF_TEMPERATURE: f32 = 10.0;
 
-/// Default acceptance threshold τ on `max rᵢ` (DESIGN.md item 3).
+/// Default acceptance threshold τ on `max rᵢ` (docs/architecture.md item 3).
 pub const DEFAULT_TAU: f32 = 0.5;
 
 /// The canonical (negative) phrases of LERF, encoded next to the dictionary.

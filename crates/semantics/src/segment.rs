@@ -1,9 +1,10 @@
-//! The per-scene segmentation stage (DESIGN.md "SemDynReg" 1–4): for every training frame,
-//! masks (SAM automatic masks, or the scene's ground-truth masks) and a label per mask (CLIP
-//! relevance against the dictionary, or the ground-truth ID the mask overlaps most), painted
-//! into an 8-bit object-ID map `SCENE/semantics/<file_path>.png` (255 = background) with a
-//! colour preview under `SCENE/semantics/preview/`, and `SCENE/semantics/semantics.json`
-//! recording what they were made with. A later run with the same inputs reuses them.
+//! The per-scene segmentation stage (docs/architecture.md "SemDynReg" 1–4): for every
+//! training frame, masks (SAM automatic masks, or the scene's ground-truth masks) and a
+//! label per mask (CLIP relevance against the dictionary, or the ground-truth ID the mask
+//! overlaps most), painted into an 8-bit object-ID map `SCENE/semantics/<file_path>.png`
+//! (255 = background) with a colour preview under `SCENE/semantics/preview/`, and
+//! `SCENE/semantics/semantics.json` recording what they were made with. A later run with
+//! the same inputs reuses them.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -249,7 +250,7 @@ impl ClipLabeler {
         Ok(Self { model, text, tau })
     }
 
-    /// Label each mask by CLIP relevance of its masked crop (DESIGN.md 2–3).
+    /// Label each mask by CLIP relevance of its masked crop (docs/architecture.md 2–3).
     pub fn labels(
         &self,
         img: &scene::ImageU8,

@@ -1,4 +1,4 @@
-//! Pinhole camera in the project's conventions (DESIGN.md, "Conventions"):
+//! Pinhole camera in the project's conventions (docs/architecture.md, "Conventions"):
 //! OpenCV axes (x right, y down, z forward), world-to-camera 4×4, intrinsics in pixels,
 //! pixel (row i, col j) sampled at (j + 0.5, i + 0.5).
 

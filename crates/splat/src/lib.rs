@@ -1,8 +1,8 @@
 //! `splat`: a CPU rasterizer for 3D Gaussians, following gsplat's "classic" mode.
 //!
-//! Conventions (DESIGN.md): OpenCV camera axes, world→camera 4×4, pixel centres at +0.5,
-//! 2D covariance + `eps2d` (0.3) on the diagonal, near plane z ≤ 0.01 culled, per-axis
-//! 3.33σ boxes, 16×16 tiles, depth sort, `alpha = min(0.999, o·exp(-σ))`, skip
+//! Conventions (docs/architecture.md): OpenCV camera axes, world→camera 4×4, pixel centres
+//! at +0.5, 2D covariance + `eps2d` (0.3) on the diagonal, near plane z ≤ 0.01 culled,
+//! per-axis 3.33σ boxes, 16×16 tiles, depth sort, `alpha = min(0.999, o·exp(-σ))`, skip
 //! `alpha < 1/255`, stop before the Gaussian that would make `T·(1−alpha) ≤ 1e-4`, zero
 //! gradient where the 0.999 clamp binds, `C = Σ cᵢαᵢTᵢ + T_final·background`.
 //!
@@ -13,7 +13,8 @@
 //! top-k maps are `H·W·k`.
 //!
 //! Scales are linear because deformable 3DGS adds the field's δs to `exp(log_scale)`
-//! (DESIGN.md, "Deformation"); callers that hold log-scales chain `d/dlog s = s · d/ds`.
+//! (docs/architecture.md, "Deformation"); callers that hold log-scales chain
+//! `d/dlog s = s · d/ds`.
 
 mod backward;
 mod bin;

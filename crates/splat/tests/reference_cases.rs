@@ -1,4 +1,4 @@
-//! The five reference cases of `shared/reference/cases` (gsplat 1.5.3 classic mode in
+//! The five reference cases of `tests/fixtures/reference/cases` (gsplat 1.5.3 classic mode in
 //! float64): image and alpha within 1e-4 (≤ 0.1% outlier pixels, for pairs sitting on a
 //! threshold), every gradient within 1e-3 relative L2.
 

@@ -1,6 +1,7 @@
 //! Applying the field's δ to the canonical Gaussians and the chain rule back
-//! (DESIGN.md "Deformation", Deformable-3DGS `render`): mean + δx, normalize(q) + δr,
-//! exp(log_scale) + δs. The rasterizer normalizes the quaternion again itself.
+//! (docs/architecture.md "Deformation", Deformable-3DGS `render`): mean + δx,
+//! normalize(q) + δr, exp(log_scale) + δs. The rasterizer normalizes the quaternion again
+//! itself.
 
 use crate::field::DeformOutput;
 use crate::model::GaussianModel;

@@ -1,5 +1,5 @@
 //! `train`: the deformable 3D Gaussian Splatting trainer (Yang et al., CVPR 2024), the
-//! SemDynReg paper's baseline, on the CPU rasterizer of `splat` (DESIGN.md).
+//! SemDynReg paper's baseline, on the CPU rasterizer of `splat` (docs/architecture.md).
 //!
 //! Pieces, in data-flow order: [`model`] (raw canonical Gaussians) and [`state`] (with their
 //! Adam moments and densification statistics, kept row-aligned), [`init`], [`encoding`] +

@@ -1,8 +1,9 @@
 //! The deformation MLP of Deformable-3DGS (`DeformNetwork`): `depth` ReLU layers of
 //! `width`, the encoded input concatenated to the output of layer `skip` (`skips=[D//2]`),
 //! and a linear head (δx, δr, δs stacked, identical to three separate `nn.Linear` heads).
-//! Forward and backward are hand-written on `gemm` (DESIGN.md: no ML framework on the
-//! training path), parallel over fixed row chunks so results are thread-count independent.
+//! Forward and backward are hand-written on `gemm` (docs/architecture.md, "Crates": no ML
+//! framework on the training path), parallel over fixed row chunks so results are
+//! thread-count independent.
 
 use crate::gemm_util::{matmul, Mat};
 use rand::Rng;
@@ -194,9 +195,9 @@ impl Mlp {
 
     /// Gradient of the parameters given `d_out` (`rows × out_dim`) for the input of the
     /// last forward. `grad` is overwritten. No gradient w.r.t. the input: Deformable-3DGS
-    /// feeds the field detached canonical means (DESIGN.md "Deformation"). Chunk-major like
-    /// the forward pass; each job of CHUNKS_PER_JOB chunks sums into its own partial
-    /// gradient, and the partials are added in job order.
+    /// feeds the field detached canonical means (docs/architecture.md "Deformation").
+    /// Chunk-major like the forward pass; each job of CHUNKS_PER_JOB chunks sums into its
+    /// own partial gradient, and the partials are added in job order.
     pub fn backward(
         &self,
         input: &[f32],

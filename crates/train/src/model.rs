@@ -1,6 +1,7 @@
-//! Canonical Gaussians stored raw (DESIGN.md "Gaussian parameters"), structure-of-arrays,
-//! with SH always allocated for degree 3 so raising the active degree never reallocates
-//! (3DGS keeps `f_rest` for the full degree too and masks by `active_sh_degree`).
+//! Canonical Gaussians stored raw (docs/architecture.md "Gaussian parameters"),
+//! structure-of-arrays, with SH always allocated for degree 3 so raising the active degree
+//! never reallocates (3DGS keeps `f_rest` for the full degree too and masks by
+//! `active_sh_degree`).
 
 use crate::error::{Result, TrainError};
 

@@ -55,7 +55,8 @@ pub struct Trainer {
     ws: Workspace,
 }
 
-/// Buffers reused every iteration (DESIGN.md: no allocation per iteration once warm).
+/// Buffers reused every iteration (docs/architecture.md, "Performance principles": no
+/// allocation per iteration once warm).
 #[derive(Default)]
 struct Workspace {
     raster: Rasterizer,

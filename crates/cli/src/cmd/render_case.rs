@@ -1,5 +1,5 @@
 //! `semdynreg render-case IN.npz OUT.npz [--topk K] [--repeat R]`: renders a rasterizer
-//! case (`shared/reference/FORMAT.md`) with `splat`, takes the loss
+//! case (`crates/splat/tests/fixtures/reference/FORMAT.md`) with `splat`, takes the loss
 //! `L = Σ image·weights (+ Σ alpha·alpha_weights)` and writes image, alpha, loss, every
 //! gradient (named as FORMAT.md), optional top-k and the median timings, so that anyone
 //! can compare our rasterizer with another implementation.

@@ -50,7 +50,7 @@ pub struct Args {
     /// Faster mode: prompt a COARSE grid first, then only uncovered points of the full grid.
     #[arg(long)]
     pub adaptive: Option<usize>,
-    /// Relevance threshold τ (DESIGN.md).
+    /// Relevance threshold τ (docs/architecture.md).
     #[arg(long, default_value_t = 0.5)]
     pub tau: f32,
     /// Keep masks whose predicted IoU is at least this (SAM's automatic generator).

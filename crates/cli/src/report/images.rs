@@ -7,7 +7,8 @@ use anyhow::{ensure, Context, Result};
 use image::{imageops, Rgb, RgbImage};
 use std::path::Path;
 
-/// Object-ID value meaning "background / irrelevant" in masks and ID maps (DESIGN.md).
+/// Object-ID value meaning "background / irrelevant" in masks and ID maps
+/// (docs/architecture.md, "Object IDs").
 pub const BACKGROUND_ID: u8 = 255;
 
 /// Reads a PNG (or JPEG) as RGB; an alpha channel is dropped (renders are opaque).

@@ -2,8 +2,8 @@
 //! (segment_anything/automatic_mask_generator.py) for a single crop: a point grid, batched
 //! decoding against one shared image embedding, filtering by predicted IoU and stability
 //! score, masks brought back to the original resolution exactly as `postprocess_masks`, box
-//! NMS — then the project's additions (DESIGN.md "SemDynReg" 1): optional small-region clean-up
-//! and non-overlapping masks.
+//! NMS — then the project's additions (docs/architecture.md "SemDynReg" 1): optional
+//! small-region clean-up and non-overlapping masks.
 //!
 //! Defaults are SAM's (`pred_iou_thresh` 0.88, `stability_score_thresh` 0.95, offset 1.0,
 //! `box_nms_thresh` 0.7, `min_mask_region_area` 0, 32×32 points). The faster

@@ -1,7 +1,7 @@
 //! Mask clean-up after NMS: SAM's `remove_small_regions` (fill small holes, drop small islands,
 //! 8-connectivity as its `cv2.connectedComponentsWithStats(…, 8)`), and the non-overlapping
-//! assignment DESIGN.md asks for (a pixel goes to the mask with the higher
-//! stability × predicted IoU; masks left under a minimum area are dropped).
+//! assignment of docs/architecture.md, "SemDynReg" item 1 (a pixel goes to the mask with
+//! the higher stability × predicted IoU; masks left under a minimum area are dropped).
 
 use super::mask::BoxMask;
 

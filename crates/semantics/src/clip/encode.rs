@@ -13,8 +13,8 @@ use crate::relevance::{DictionaryEmbeddings, CANONICAL_PHRASES};
 pub const MASK_BATCH: usize = 8;
 
 impl ClipModel {
-    /// Normalized embedding of each mask's crop (DESIGN.md item 2); `masks` are row-major
-    /// booleans of the image's size. An empty mask is an error.
+    /// Normalized embedding of each mask's crop (docs/architecture.md item 2); `masks` are
+    /// row-major booleans of the image's size. An empty mask is an error.
     pub fn encode_masks<M: AsRef<[bool]>>(
         &self,
         image: &RgbImage,

@@ -1,5 +1,5 @@
-//! CLIP image and text towers for dictionary matching (paper Sec. 3.1, DESIGN.md item 2),
-//! inference only, on candle.
+//! CLIP image and text towers for dictionary matching (paper Sec. 3.1, docs/architecture.md
+//! item 2), inference only, on candle.
 //!
 //! Supported checkpoints: OpenCLIP ViT models (the paper's ViT-B/16 laion2b,
 //! `open_clip_model.safetensors` / `open_clip_pytorch_model.bin`) and OpenAI ViT models in the

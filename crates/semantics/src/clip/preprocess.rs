@@ -1,6 +1,7 @@
-//! Image-tower input for one mask (DESIGN.md item 2): the bounding box of `I ⊙ M` (zero
-//! outside the mask), zero-padded to a centred square (as LangSplat's `pad_img`), resized to
-//! the model's side length, scaled to [0, 1] and normalized with CLIP's mean and std.
+//! Image-tower input for one mask (docs/architecture.md "SemDynReg" item 2): the bounding
+//! box of `I ⊙ M` (zero outside the mask), zero-padded to a centred square (as LangSplat's
+//! `pad_img`), resized to the model's side length, scaled to [0, 1] and normalized with
+//! CLIP's mean and std.
 //!
 //! The resize is Pillow's bicubic, bit for bit ([`super::resize`]): CLIP's own eval transform
 //! is torchvision `Resize(S, BICUBIC)` on a PIL image, and the square input makes its centre

@@ -1,15 +1,15 @@
-//! Test helpers: reading the reference cases (`shared/reference/FORMAT.md`) and comparing.
+//! Test helpers: reading the reference cases (`tests/fixtures/reference/FORMAT.md`) and
+//! comparing.
 #![allow(dead_code)]
+
+mod fixtures;
+pub use fixtures::cases_dir;
 
 use npyz::npz::NpzArchive;
 use splat::{Camera, Colors, Gaussians, RenderOptions};
 use std::fs::File;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
-
-pub fn cases_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/reference/cases")
-}
 
 /// An opened `.npz` whose arrays are read as f64 whatever their dtype.
 pub struct Npz(NpzArchive<BufReader<File>>, PathBuf);

@@ -2,8 +2,9 @@
 //!
 //! The paper leaves k, λ, λx, λr, λs and τ_d open; the defaults here are starting points to
 //! be replaced by the ablation of issue 6 (README table). The schedule follows the paper's
-//! "activated after an initial training phase (e.g. after 10k iterations)" and DESIGN.md item 6
-//! (active to the end of a 40k schedule), and is rescaled with `--iters` by [`RegConfig::rescaled`].
+//! "activated after an initial training phase (e.g. after 10k iterations)" and
+//! docs/architecture.md item 6 (active to the end of a 40k schedule), and is rescaled with
+//! `--iters` by [`RegConfig::rescaled`].
 
 use serde::{Deserialize, Serialize};
 
@@ -47,7 +48,7 @@ pub struct RegConfig {
     pub persist_min_weight: f32,
 }
 
-/// Where the members of an object's group come from (DESIGN.md, "SemDynReg" item 5).
+/// Where the members of an object's group come from (docs/architecture.md, "SemDynReg" item 5).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Membership {

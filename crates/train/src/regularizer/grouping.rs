@@ -17,7 +17,8 @@
 
 use super::error::RegError;
 
-/// Object ID reserved for background pixels in object-ID maps (DESIGN.md, scene masks).
+/// Object ID reserved for background pixels in object-ID maps (docs/architecture.md,
+/// "Object IDs").
 pub const BACKGROUND_ID: u8 = 255;
 
 /// Marker for "no Gaussian" in a top-k slot (`splat::ForwardOutput::topk_ids`).

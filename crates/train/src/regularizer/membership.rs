@@ -1,5 +1,5 @@
 //! Persistent object membership: our extension of the paper's groups (Sec. 3.3), selected with
-//! `[reg] membership = "persistent"` (DESIGN.md, "SemDynReg" item 5).
+//! `[reg] membership = "persistent"` (docs/architecture.md, "SemDynReg" item 5).
 //!
 //! The paper's `G_o` holds the Gaussians in the top-k of the pixels that carry ID `o` *in this
 //! view*. A Gaussian that drew the moving object at other times but lags behind it now (a

@@ -1,4 +1,5 @@
-//! SemDynReg: object-level deformation regularization (paper Sec. 3.3–3.4, DESIGN.md items 5–6).
+//! SemDynReg: object-level deformation regularization (paper Sec. 3.3–3.4,
+//! docs/architecture.md items 5–6).
 //!
 //! Pure functions on flat `f32` buffers, independent of the rest of the trainer, so that they
 //! are tested alone and wired into the training step:

@@ -1,6 +1,6 @@
 //! The regularizer as one training-step hook: config + reused group/stat buffers.
 //!
-//! Intended use in the training loop (paper Sec. 3.4, DESIGN.md item 6):
+//! Intended use in the training loop (paper Sec. 3.4, docs/architecture.md item 6):
 //! ```text
 //! let k = if reg.active_at(iter) { reg.render_topk() } else { 0 };  // RenderOptions::topk
 //! let out = rasterizer.forward(&deformed, &camera, &opts)?;

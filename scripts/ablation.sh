@@ -51,14 +51,17 @@ fi
 "$BIN" segment "$SCENE" --dict "$DICT" --masks gt --labels gt
 
 # One shared baseline: every configuration's compare folder links `baseline` to it; the first
-# compare trains it, the others find it finished and reuse it.
+# compare trains it, the others find it finished and reuse it. The same for compare's
+# rigid-objects run: it trains without the regularizer, so no [reg] setting changes it.
 BASE="$OUT/baseline"
-mkdir -p "$BASE"
+RIGID="$OUT/rigid"
+mkdir -p "$BASE" "$RIGID"
 
 run_config() { # name k lambda
   local dir="$OUT/$1"
   mkdir -p "$dir"
   [ -e "$dir/baseline" ] || ln -s "$(realpath "$BASE")" "$dir/baseline"
+  [ -e "$dir/rigid" ] || ln -s "$(realpath "$RIGID")" "$dir/rigid"
   printf '[init]\nrandom_points = %s\n[reg]\nk = %s\nlambda = %s\nmembership = "%s"\n' \
     "$POINTS" "$2" "$3" "$MEMBERSHIP" >"$dir/config.toml"
   [ -z "${EXTRA:-}" ] || printf '%s\n' "$EXTRA" >>"$dir/config.toml"

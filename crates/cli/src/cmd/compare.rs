@@ -1,41 +1,43 @@
-//! `semdynreg compare SCENE --out DIR`: the paper's experiment (issue 6, item 3) — the
-//! baseline and SemDynReg scored on the test split (full frame, and zoomed object crops at
-//! t = 0…5 s), written to `DIR/results.json`, `DIR/report.md` and `DIR/report.html`, with
-//! the paper-style tables printed.
+//! `semdynreg compare SCENE --out DIR`: the paper's experiment (issue 6, item 3) with a
+//! third method — the baseline, the paper's SemDynReg and rigid objects
+//! (`report::methods::METHODS`) scored on the test split (full frame, and zoomed object
+//! crops at t = 0…5 s), written to `DIR/results.json`, `DIR/report.md` and
+//! `DIR/report.html`, with the paper-style tables printed.
 
 use crate::report::consistency::run_consistency;
 use crate::report::evaluate::{evaluate_run, EvalSet, RenderDir, RunEval};
-use crate::report::results::{Protocol, Results};
+use crate::report::figure::{self, FigureMethod};
+use crate::report::methods::{Method, METHODS};
+use crate::report::results::{MethodResults, Protocol, Results};
 use crate::report::runs::{prepare_run, RunPlan, TrainSettings};
 use crate::report::scorer::{load_lpips, MetricsScorer};
 use crate::report::trainlog::TrainLog;
-use crate::report::{
-    crops::CropPolicy, figure, inputs, text_tables, write_plots, write_report, Report,
-};
+use crate::report::{crops::CropPolicy, inputs, text_tables, write_plots, write_report, Report};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use train::regularizer::ConsistencyReport;
 
-/// Baseline vs SemDynReg on a scene: results.json, report.md, report.html.
+/// Baseline, SemDynReg and rigid objects on a scene: results.json, report.md, report.html.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Scene folder (D-NeRF layout; toycars adds `masks/` and `objects.json`).
     pub scene: PathBuf,
-    /// Output folder: the runs (`baseline/`, `semdynreg/`), results.json, report.md,
-    /// report.html and their images. Finished runs found there are reused, unfinished ones
-    /// resumed; SemDynReg starts from the baseline's checkpoint at the regularizer's start
-    /// (`train --fork`) when the baseline has one.
+    /// Output folder: the runs (`baseline/`, `semdynreg/`, `rigid/`), results.json,
+    /// report.md, report.html and their images. Finished runs found there are reused,
+    /// unfinished ones resumed; SemDynReg starts from the baseline's checkpoint at the
+    /// regularizer's start (`train --fork`) when the baseline has one; rigid objects
+    /// (`train --no-reg --objects`) trains from scratch.
     #[arg(long)]
     pub out: PathBuf,
-    /// Rescale both runs' schedule to N iterations (default: the full 40k).
+    /// Rescale every run's schedule to N iterations (default: the full 40k).
     #[arg(long)]
     pub iters: Option<u32>,
-    /// Seed of both runs.
+    /// Seed of every run.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Training config (TOML) for both runs.
+    /// Training config (TOML) for every run.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Score this folder of rendered test frames as the baseline instead of training one
@@ -45,6 +47,10 @@ pub struct Args {
     /// Score this folder of rendered test frames as SemDynReg instead of training it.
     #[arg(long, requires = "baseline_renders")]
     pub semdynreg_renders: Option<PathBuf>,
+    /// Score this folder of rendered test frames as rigid objects (with the two above;
+    /// without it, a renders-only comparison has no rigid-objects column).
+    #[arg(long, requires = "baseline_renders")]
+    pub rigid_renders: Option<PathBuf>,
     /// Seconds spanned by time 0 → 1 (toycars: 6 s), to place t = 0…5 s.
     #[arg(long, default_value_t = 6.0)]
     pub duration_s: f32,
@@ -56,34 +62,71 @@ pub struct Args {
     pub white_background: bool,
 }
 
-/// Where each method's renders (and, when trained here, logs and config) are.
+/// One compared method: where its renders are and, when trained here, its run folder
+/// (for the consistency metric).
+struct MethodRun {
+    method: &'static Method,
+    renders: PathBuf,
+    run_dir: Option<PathBuf>,
+}
+
+/// The compared methods in display order, with what their runs left (logs, config).
 struct Runs {
-    baseline: PathBuf,
-    semdynreg: PathBuf,
-    /// The run folders, when trained here (for the consistency metric).
-    run_dirs: Option<[PathBuf; 2]>,
-    logs: Vec<(&'static str, TrainLog)>,
+    methods: Vec<MethodRun>,
+    /// (method display name, training log).
+    logs: Vec<(String, TrainLog)>,
     config: BTreeMap<String, serde_json::Value>,
     commands: Vec<String>,
+    notes: Vec<String>,
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let runs = match (&args.baseline_renders, &args.semdynreg_renders) {
-        (Some(b), Some(s)) => Runs {
-            baseline: b.clone(),
-            semdynreg: s.clone(),
-            run_dirs: None,
-            logs: Vec::new(),
-            config: BTreeMap::new(),
-            commands: vec![command_line()],
-        },
-        _ => train_both(&args)?,
+    let runs = match &args.baseline_renders {
+        Some(_) => given_renders(&args),
+        None => train_all(&args)?,
     };
     evaluate_and_report(&args, runs)
 }
 
-/// Trains (or reuses) and renders `OUT/baseline` and `OUT/semdynreg` with one schedule.
-fn train_both(args: &Args) -> Result<Runs> {
+/// The `--<key>-renders` folder given for a method, if any.
+fn renders_flag<'a>(args: &'a Args, key: &str) -> Option<&'a PathBuf> {
+    match key {
+        "baseline" => args.baseline_renders.as_ref(),
+        "semdynreg" => args.semdynreg_renders.as_ref(),
+        "rigid" => args.rigid_renders.as_ref(),
+        _ => None,
+    }
+}
+
+/// The renders-only comparison: the methods whose renders were given.
+fn given_renders(args: &Args) -> Runs {
+    let mut methods = Vec::new();
+    let mut notes = Vec::new();
+    for m in &METHODS {
+        match renders_flag(args, m.key) {
+            Some(dir) => methods.push(MethodRun {
+                method: m,
+                renders: dir.clone(),
+                run_dir: None,
+            }),
+            None => notes.push(format!(
+                "{} not compared: no --{}-renders given",
+                m.display, m.key
+            )),
+        }
+    }
+    Runs {
+        methods,
+        logs: Vec::new(),
+        config: BTreeMap::new(),
+        commands: vec![command_line()],
+        notes,
+    }
+}
+
+/// Trains (or reuses) and renders `OUT/<folder>` of every method, with one schedule, in
+/// list order (so that a run is there before another forks from it).
+fn train_all(args: &Args) -> Result<Runs> {
     let settings = TrainSettings {
         scene: args.scene.clone(),
         iters: args.iters,
@@ -92,42 +135,31 @@ fn train_both(args: &Args) -> Result<Runs> {
         downscale: args.downscale,
         white_background: args.white_background,
     };
-    let plans = [
-        RunPlan {
-            label: "baseline",
-            dir: args.out.join("baseline"),
-            reg: false,
-            fork_from: None,
-        },
-        RunPlan {
-            label: "semdynreg",
-            dir: args.out.join("semdynreg"),
-            reg: true,
-            fork_from: Some(args.out.join("baseline")),
-        },
-    ];
-    let mut commands = vec![command_line()];
-    let mut renders = Vec::new();
-    let mut logs = Vec::new();
-    let mut config = BTreeMap::new();
-    for plan in &plans {
-        let (cmds, dir) = prepare_run(plan, &settings)?;
-        commands.extend(cmds);
-        renders.push(dir);
+    let mut runs = Runs {
+        methods: Vec::new(),
+        logs: Vec::new(),
+        config: BTreeMap::new(),
+        commands: vec![command_line()],
+        notes: Vec::new(),
+    };
+    for m in &METHODS {
+        let plan = RunPlan::for_method(m, &args.out);
+        let (cmds, renders) = prepare_run(&plan, &settings)?;
+        runs.commands.extend(cmds);
         let log_path = plan.dir.join("metrics.jsonl");
         if log_path.is_file() {
-            logs.push((plan.label, TrainLog::read(&log_path)?));
+            runs.logs
+                .push((m.display.to_string(), TrainLog::read(&log_path)?));
         }
-        config.insert(plan.label.to_string(), run_config(&plan.dir)?);
+        runs.config
+            .insert(m.key.to_string(), run_config(&plan.dir)?);
+        runs.methods.push(MethodRun {
+            method: m,
+            renders,
+            run_dir: Some(plan.dir),
+        });
     }
-    Ok(Runs {
-        baseline: renders[0].clone(),
-        semdynreg: renders[1].clone(),
-        run_dirs: Some(plans.map(|p| p.dir)),
-        logs,
-        config,
-        commands,
-    })
+    Ok(runs)
 }
 
 /// The resolved config of a run's latest checkpoint, as JSON.
@@ -154,7 +186,7 @@ fn command_line() -> String {
 
 fn progress_bar(label: &str, total: usize) -> ProgressBar {
     let bar = ProgressBar::new(total as u64);
-    let style = ProgressStyle::with_template("{msg:>12} [{bar:30}] {pos}/{len} frames {elapsed}")
+    let style = ProgressStyle::with_template("{msg:>17} [{bar:30}] {pos}/{len} frames {elapsed}")
         .expect("static template")
         .progress_chars("=> ");
     bar.set_style(style);
@@ -172,7 +204,8 @@ fn score(set: &EvalSet, label: &str, dir: &Path, scorer: &mut MetricsScorer) -> 
     Ok(eval)
 }
 
-fn evaluate_and_report(args: &Args, runs: Runs) -> Result<()> {
+/// The scene's evaluation split, loaded as the runs were trained.
+fn load_dataset(args: &Args) -> Result<scene::Dataset> {
     let opts = scene::LoadOptions {
         background: if args.white_background {
             [1.0; 3]
@@ -181,64 +214,41 @@ fn evaluate_and_report(args: &Args, runs: Runs) -> Result<()> {
         },
         downscale: args.downscale,
     };
-    let ds = scene::load_dataset(&args.scene, &opts)
-        .with_context(|| format!("loading scene {}", args.scene.display()))?;
+    scene::load_dataset(&args.scene, &opts)
+        .with_context(|| format!("loading scene {}", args.scene.display()))
+}
+
+fn evaluate_and_report(args: &Args, mut runs: Runs) -> Result<()> {
+    let ds = load_dataset(args)?;
     let policy = CropPolicy::default();
     let set = inputs::eval_set(&ds, args.duration_s, policy)?;
     let (lpips, lpips_text) = load_lpips()?;
     let mut scorer = MetricsScorer::new(lpips);
-    let base = score(&set, "baseline", &runs.baseline, &mut scorer)?;
-    let ours = score(&set, "SemDynReg", &runs.semdynreg, &mut scorer)?;
+    let mut evals = Vec::with_capacity(runs.methods.len());
+    for m in &runs.methods {
+        evals.push(score(&set, m.method.display, &m.renders, &mut scorer)?);
+    }
     let (id_maps, id_source) = inputs::figure_id_maps(&ds, &set)?;
-    let rows = figure::write_figure(&args.out, &set, &base, &ours, &id_maps)?;
-    let mut notes = Vec::new();
-    if set.moving_object().is_none() {
-        notes.push(
-            "no moving object in objects.json (or no objects.json): crop tables are empty".into(),
-        );
-    }
-    let mut base_results = base.results;
-    let mut ours_results = ours.results;
-    match &runs.run_dirs {
-        Some([b, o]) => {
-            for (run, res) in [(b, &mut base_results), (o, &mut ours_results)] {
-                if let Some(r) = consistency(run, &mut notes) {
-                    res.deformation_consistency_rms = Some(r.rms);
-                    res.deformation_consistency_per_object = r
-                        .per_object
-                        .iter()
-                        .map(|x| (object_name(&set, x.object), x.rms))
-                        .collect();
-                    res.deformation_follow_per_object = r
-                        .per_object
-                        .iter()
-                        .filter_map(|x| Some((object_name(&set, x.object), x.follow()?)))
-                        .collect();
-                }
-            }
-        }
-        None => notes.push(
-            "deformation_consistency_rms is null: it needs the trained models, not only their renders".into(),
-        ),
-    }
+    let figure_methods: Vec<FigureMethod> = runs
+        .methods
+        .iter()
+        .zip(&evals)
+        .map(|(m, eval)| FigureMethod {
+            key: m.method.key,
+            name: m.method.display,
+            eval,
+        })
+        .collect();
+    let figure = figure::write_figure(&args.out, &set, &figure_methods, &id_maps)?;
+    let mut notes = std::mem::take(&mut runs.notes);
+    let by_method = method_results(&runs, evals, &set, &mut notes);
     let results = Results {
-        baseline: base_results,
-        semdynreg: ours_results,
+        methods: runs.methods.iter().map(|m| m.method.into()).collect(),
+        by_method,
         scene: args.scene.display().to_string(),
         commands: runs.commands,
         config: runs.config,
-        protocol: Protocol {
-            split: if ds.test.is_empty() { "val" } else { "test" }.into(),
-            duration_s: args.duration_s,
-            t_seconds: set.t_seconds.clone(),
-            crop_policy: policy.describe(),
-            ssim_variant: MetricsScorer::ssim_description().into(),
-            lpips: lpips_text,
-            moving_object: set
-                .moving_object()
-                .map(|o| o.name.clone())
-                .unwrap_or_default(),
-        },
+        protocol: protocol(args, &ds, &set, policy, lpips_text),
         notes,
     };
     let plots = write_plots(
@@ -249,7 +259,7 @@ fn evaluate_and_report(args: &Args, runs: Runs) -> Result<()> {
     )?;
     let report = Report {
         results: &results,
-        rows: &rows,
+        figure: &figure,
         id_map_source: &id_source,
         plots: &plots,
     };
@@ -258,6 +268,76 @@ fn evaluate_and_report(args: &Args, runs: Runs) -> Result<()> {
     println!("results: {}", paths.results_json.display());
     println!("report:  {}", paths.html.display());
     Ok(())
+}
+
+/// Each method's scores with its consistency metric (when its run was trained here),
+/// keyed by method; what could not be measured goes to `notes`.
+fn method_results(
+    runs: &Runs,
+    evals: Vec<RunEval>,
+    set: &EvalSet,
+    notes: &mut Vec<String>,
+) -> BTreeMap<String, MethodResults> {
+    if set.moving_object().is_none() {
+        notes.push(
+            "no moving object in objects.json (or no objects.json): crop tables are empty".into(),
+        );
+    }
+    if runs.methods.iter().any(|m| m.run_dir.is_none()) {
+        notes.push(
+            "deformation_consistency_rms is null: it needs the trained models, not only their renders".into(),
+        );
+    }
+    let mut by_method = BTreeMap::new();
+    for (m, eval) in runs.methods.iter().zip(evals) {
+        let mut res = eval.results;
+        if let Some(run) = &m.run_dir {
+            add_consistency(&mut res, run, set, notes);
+        }
+        by_method.insert(m.method.key.to_string(), res);
+    }
+    by_method
+}
+
+/// How the numbers were produced (results.json's `protocol`).
+fn protocol(
+    args: &Args,
+    ds: &scene::Dataset,
+    set: &EvalSet,
+    policy: CropPolicy,
+    lpips: String,
+) -> Protocol {
+    Protocol {
+        split: if ds.test.is_empty() { "val" } else { "test" }.into(),
+        duration_s: args.duration_s,
+        t_seconds: set.t_seconds.clone(),
+        crop_policy: policy.describe(),
+        ssim_variant: MetricsScorer::ssim_description().into(),
+        lpips,
+        moving_object: set
+            .moving_object()
+            .map(|o| o.name.clone())
+            .unwrap_or_default(),
+        moving_objects: set.moving_objects().map(|o| o.name.clone()).collect(),
+    }
+}
+
+/// Fills the consistency fields of `res` from the trained run, or says in `notes` why not.
+fn add_consistency(res: &mut MethodResults, run: &Path, set: &EvalSet, notes: &mut Vec<String>) {
+    let Some(r) = consistency(run, notes) else {
+        return;
+    };
+    res.deformation_consistency_rms = Some(r.rms);
+    res.deformation_consistency_per_object = r
+        .per_object
+        .iter()
+        .map(|x| (object_name(set, x.object), x.rms))
+        .collect();
+    res.deformation_follow_per_object = r
+        .per_object
+        .iter()
+        .filter_map(|x| Some((object_name(set, x.object), x.follow()?)))
+        .collect();
 }
 
 /// The name `objects.json` gives object `id` (its number when it has none).

@@ -1,16 +1,18 @@
 //! `semdynreg demo`: the paper's experiment end to end at a small size (issue 6, item 4) —
-//! generate toycars scene1, build its object-ID maps (SAM + CLIP when the SAM weights are
-//! present, else the ground-truth masks, saying which), run `compare`, print the paper-style
-//! tables and the path of `report.html`.
+//! generate toycars scene1, build its object-ID maps (the ground-truth masks by default,
+//! SAM or SAM + CLIP on request, saying which), run `compare` (three trainings: baseline,
+//! SemDynReg, rigid objects), print the paper-style tables and the path of `report.html`.
 
 use crate::report::runs::run_self;
 use anyhow::{bail, Result};
 use std::path::PathBuf;
 
-/// Small toycars scene1, both runs, evaluation and report in one command.
+/// Small toycars scene1, three trainings (baseline, the paper's SemDynReg forked from it,
+/// rigid objects from scratch), evaluation and report in one command.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Output folder: `scene/`, the two runs and the report.
+    /// Output folder: `scene/`, the three runs (`baseline/`, `semdynreg/`, `rigid/`) and
+    /// the report.
     #[arg(long, default_value = "demo")]
     pub out: PathBuf,
     #[arg(long, default_value_t = 160)]
@@ -24,7 +26,7 @@ pub struct Args {
     #[arg(long, default_value_t = 3000)]
     pub iters: u32,
     /// Random initial Gaussians: fewer than the 40k schedule's 100k, which the field would
-    /// evaluate at every step, to keep the demo short. Written to `OUT/demo.toml` for both runs.
+    /// evaluate at every step, to keep the demo short. Written to `OUT/demo.toml` for all runs.
     #[arg(long, default_value_t = 20_000)]
     pub points: usize,
     #[arg(long, default_value_t = 0)]
@@ -34,10 +36,11 @@ pub struct Args {
     /// OUT/scene is generated; an existing OUT/scene is reused as it is.
     #[arg(long, default_value_t = 1.0)]
     pub drive: f32,
-    /// Object-ID maps: `gt` (the scene's ground-truth instance masks: the default, since SAM
-    /// over every training frame takes minutes per frame on 2 cores and no package ships
-    /// CLIP weights), `sam` (MobileSAM masks labelled by ground truth), or `sam-clip`
-    /// (MobileSAM masks labelled by CLIP; needs --clip).
+    /// Object-ID maps: `gt` (the scene's ground-truth instance masks: the default, because
+    /// every training frame must be segmented — SAM's automatic grid takes ~11 s per 480×360
+    /// frame on 2 cores — and no package ships CLIP weights), `sam` (MobileSAM masks
+    /// labelled by ground truth), or `sam-clip` (MobileSAM masks labelled by CLIP; needs
+    /// --clip).
     #[arg(long, value_enum, default_value = "gt")]
     pub id_maps: IdMaps,
     /// CLIP weights (safetensors) for `--id-maps sam-clip`.

@@ -32,7 +32,7 @@ pub struct ObjectSpec {
     pub moving: bool,
 }
 
-/// The frames, objects and protocol shared by both runs.
+/// The frames, objects and protocol shared by every method.
 pub struct EvalSet {
     pub frames: Vec<EvalFrame>,
     pub objects: Vec<ObjectSpec>,
@@ -49,8 +49,14 @@ impl EvalSet {
             .context("the evaluation split has no frames")
     }
 
+    /// The first moving object (the one `moving_object_crop` and the figure's zooms show).
     pub fn moving_object(&self) -> Option<&ObjectSpec> {
-        self.objects.iter().find(|o| o.moving)
+        self.moving_objects().next()
+    }
+
+    /// Every moving object, in `objects.json` order.
+    pub fn moving_objects(&self) -> impl Iterator<Item = &ObjectSpec> {
+        self.objects.iter().filter(|o| o.moving)
     }
 }
 
@@ -129,18 +135,24 @@ pub fn evaluate_run(
     }
     let picked_renders: Vec<RgbImage> = picked.iter().map(|i| kept[i].clone()).collect();
     let mut static_object_crops = BTreeMap::new();
-    let mut moving_object_crop = CropSeries::default();
+    let mut moving_object_crops = BTreeMap::new();
     for object in &set.objects {
         let series = crop_series(set, &picked, &picked_renders, object, scorer)?;
-        if object.moving && moving_object_crop.per_time.is_empty() {
-            moving_object_crop = series;
+        let crops = if object.moving {
+            &mut moving_object_crops
         } else {
-            static_object_crops.insert(object.name.clone(), series);
-        }
+            &mut static_object_crops
+        };
+        crops.insert(object.name.clone(), series);
     }
+    let moving_object_crop = set
+        .moving_object()
+        .map(|o| moving_object_crops[&o.name].clone())
+        .unwrap_or_default();
     let results = MethodResults {
         full_frame: mean_scores(&full),
         moving_object_crop,
+        moving_object_crops,
         static_object_crops,
         deformation_consistency_rms: None,
         deformation_consistency_per_object: Default::default(),
@@ -294,6 +306,8 @@ mod tests {
             let expected = 64.0 * 100.0 / (144.0 * 3.0);
             assert!((ts.psnr.unwrap() - expected).abs() < 1e-9);
         }
+        assert_eq!(r.moving_object_crops["mover"], r.moving_object_crop);
+        assert_eq!(r.static_object_crops.len(), 1, "the mover is not static");
         let sitter = &r.static_object_crops["sitter"];
         assert_eq!(sitter.mean.psnr, Some(0.0));
         assert_eq!(sitter.per_time[3].crop, Some([38, 28, 14, 14]));
@@ -301,6 +315,21 @@ mod tests {
         assert_eq!(scorer.sizes.len(), 18);
         assert_eq!(eval.picked_renders.len(), 6);
         assert!(r.full_frame.psnr.unwrap() > 0.0);
+    }
+
+    #[test]
+    fn every_moving_object_has_its_crop_and_the_first_stays_the_main_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut set = synthetic_set(dir.path());
+        set.objects[1].moving = true;
+        let mut scorer = RecordingScorer::default();
+        let eval =
+            evaluate_run(&set, &RenderDir(dir.path().into()), &mut scorer, &|_, _| {}).unwrap();
+        let r = &eval.results;
+        let names: Vec<&String> = r.moving_object_crops.keys().collect();
+        assert_eq!(names, ["mover", "sitter"]);
+        assert_eq!(r.moving_object_crop, r.moving_object_crops["mover"]);
+        assert!(r.static_object_crops.is_empty());
     }
 
     #[test]

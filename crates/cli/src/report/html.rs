@@ -1,14 +1,15 @@
 //! `DIR/report.html`: self-contained apart from the relative image paths (`images/*.png`,
 //! `plots/*.svg`) beside it, so the folder can be copied or zipped as is.
 
-use super::figure::{FigureRow, COLUMNS};
+use super::figure::Figure;
 use super::table::{all_tables, escape};
 use super::Report;
 
 const STYLE: &str = "body{font-family:sans-serif;margin:2em;max-width:1400px}\
 table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}\
 caption{font-weight:bold;text-align:left;padding:4px 0}tr.block th{background:#eee;text-align:center}\
-table.fig td{padding:2px;text-align:center;vertical-align:middle}table.fig img{max-width:260px;display:block}\
+table.fig td{padding:2px;text-align:center;vertical-align:middle}table.fig img{max-width:200px;display:block}\
+div.fig{overflow-x:auto}\
 code,pre{background:#f5f5f5}";
 
 /// The whole HTML document.
@@ -16,8 +17,9 @@ pub fn render(report: &Report) -> String {
     let r = report.results;
     let mut out = format!(
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
-         <title>SemDynReg vs baseline: {scene}</title><style>{STYLE}</style></head><body>\n\
-         <h1>SemDynReg vs baseline: <code>{scene}</code></h1>\n",
+         <title>{title}: {scene}</title><style>{STYLE}</style></head><body>\n\
+         <h1>{title}: <code>{scene}</code></h1>\n",
+        title = escape(&super::title(r)),
         scene = escape(&r.scene)
     );
     out.push_str(&protocol(report));
@@ -25,7 +27,7 @@ pub fn render(report: &Report) -> String {
     for t in all_tables(r) {
         out.push_str(&t.to_html());
     }
-    out.push_str(&figure(report.rows));
+    out.push_str(&figure(report.figure));
     out.push_str("<h2>Plots</h2>\n");
     for p in report.plots {
         out.push_str(&format!(
@@ -40,7 +42,7 @@ pub fn render(report: &Report) -> String {
         out.push('\n');
     }
     out.push_str(
-        "</pre>\n<p>All numbers, the crop boxes and both runs' configurations: \
+        "</pre>\n<p>All numbers, the crop boxes and every run's configuration: \
                   <a href=\"results.json\">results.json</a>.</p>\n</body></html>\n",
     );
     out
@@ -51,7 +53,7 @@ fn protocol(report: &Report) -> String {
     let mut out = String::from("<h2>Protocol</h2>\n<ul>\n");
     let items = [
         format!("Split scored: <b>{}</b>; time 0→1 spans {} s; crop tables at t = {:?} s, each the nearest frame of the split.", escape(&p.split), p.duration_s, p.t_seconds),
-        format!("Moving object: <b>{}</b>. Crops: {}.", escape(&p.moving_object), escape(&p.crop_policy)),
+        format!("Moving objects: <b>{}</b>. Crops: {}.", escape(&super::moving_list(p)), escape(&p.crop_policy)),
         format!("SSIM: {}. LPIPS: {}.", escape(&p.ssim_variant), escape(&p.lpips)),
         format!("Object-ID maps shown: {}.", escape(report.id_map_source)),
     ];
@@ -63,23 +65,23 @@ fn protocol(report: &Report) -> String {
     out
 }
 
-fn figure(rows: &[FigureRow]) -> String {
-    let mut out = String::from(
-        "<h2>Qualitative comparison</h2>\n<p>Rows are time steps; the magenta box is the \
-         moving object's padded crop, enlarged in the last three columns.</p>\n\
-         <table class=\"fig\">\n<tr><th>t</th>",
+fn figure(fig: &Figure) -> String {
+    let mut out = format!(
+        "<h2>Qualitative comparison</h2>\n<p>{}</p>\n\
+         <div class=\"fig\"><table class=\"fig\">\n<tr><th>t</th>",
+        escape(&super::figure_caption(fig))
     );
-    for c in COLUMNS {
+    for c in &fig.columns {
         out.push_str(&format!("<th>{}</th>", escape(c)));
     }
     out.push_str("</tr>\n");
-    for row in rows {
+    for row in &fig.rows {
         out.push_str(&format!(
             "<tr><th>{} s<br><small>{}</small></th>",
             row.t_seconds,
             escape(&row.frame)
         ));
-        for (img, col) in row.images.iter().zip(COLUMNS) {
+        for (img, col) in row.images.iter().zip(&fig.columns) {
             match img {
                 Some(src) => out.push_str(&format!(
                     "<td><img src=\"{}\" alt=\"{} at {} s\"></td>",
@@ -92,6 +94,6 @@ fn figure(rows: &[FigureRow]) -> String {
         }
         out.push_str("</tr>\n");
     }
-    out.push_str("</table>\n");
+    out.push_str("</table></div>\n");
     out
 }

@@ -2,8 +2,10 @@
 //!
 //! The issue fixes the required keys; every one of them is always present (a number, or
 //! `null` where it cannot be measured, with the reason in `notes`). `Option` fields are
-//! therefore never skipped during serialization.
+//! therefore never skipped during serialization. A method that was not compared (no
+//! `--rigid-renders` when scoring renders only) has no key at all, and is not in `methods`.
 
+use super::methods::MethodName;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -49,13 +51,18 @@ pub struct CropSeries {
     pub mean: Scores,
 }
 
-/// Everything measured for one trained run (the baseline or SemDynReg).
+/// Everything measured for one method's run. New fields take `#[serde(default)]`, so
+/// that older files still read.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct MethodResults {
     /// Mean over all evaluation frames of the per-frame scores.
     pub full_frame: Scores,
-    /// The moving object's crop (the paper's Tables 1 and 2).
+    /// The first moving object's crop (the paper's Tables 1 and 2), kept for the readers
+    /// of scenes with one moving object; the same series is in `moving_object_crops`.
     pub moving_object_crop: CropSeries,
+    /// One entry per moving object, keyed by its name in `objects.json`.
+    #[serde(default)]
+    pub moving_object_crops: BTreeMap<String, CropSeries>,
     /// One entry per static object, keyed by its name in `objects.json`.
     pub static_object_crops: BTreeMap<String, CropSeries>,
     /// RMS distance (world units) between the object Gaussians' deformed positions and their
@@ -89,23 +96,39 @@ pub struct Protocol {
     /// Which SSIM variant and which LPIPS network (or why LPIPS is absent).
     pub ssim_variant: String,
     pub lpips: String,
-    /// Name of the moving object, from `objects.json`.
+    /// Name of the first moving object, from `objects.json` (empty when none moves).
     pub moving_object: String,
+    /// Names of every moving object, in `objects.json` order.
+    #[serde(default)]
+    pub moving_objects: Vec<String>,
 }
 
 /// The whole `results.json`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Results {
-    pub baseline: MethodResults,
-    pub semdynreg: MethodResults,
+    /// The methods compared, in display order.
+    pub methods: Vec<MethodName>,
+    /// Each method's results as a top-level key (`baseline`, `semdynreg`, `rigid`), where
+    /// the readers of the two-method files find them.
+    #[serde(flatten)]
+    pub by_method: BTreeMap<String, MethodResults>,
     pub scene: String,
-    /// The command lines that produced both runs and this evaluation.
+    /// The command lines that produced the runs and this evaluation.
     pub commands: Vec<String>,
     /// The resolved configuration of each run (as read from the run), or `null`.
     pub config: BTreeMap<String, serde_json::Value>,
     pub protocol: Protocol,
     /// Caveats (missing LPIPS weights, missing consistency metric, …).
     pub notes: Vec<String>,
+}
+
+impl Results {
+    /// Each compared method's display name and results, in display order.
+    pub fn ordered(&self) -> impl Iterator<Item = (&str, &MethodResults)> {
+        self.methods
+            .iter()
+            .filter_map(|m| Some((m.name.as_str(), self.by_method.get(&m.key)?)))
+    }
 }
 
 /// Mean of the present values of one metric; `None` when none is present.
@@ -155,5 +178,26 @@ mod tests {
         assert!(json["full_frame"].get("lpips").unwrap().is_null());
         assert!(json.get("deformation_consistency_rms").unwrap().is_null());
         assert!(json["moving_object_crop"]["per_time"].is_array());
+    }
+
+    #[test]
+    fn methods_are_top_level_keys_and_round_trip() {
+        let mut r = Results::default();
+        for key in ["baseline", "semdynreg"] {
+            r.methods.push(MethodName {
+                key: key.into(),
+                name: key.to_uppercase(),
+            });
+            r.by_method.insert(key.into(), MethodResults::default());
+        }
+        let json = serde_json::to_value(&r).unwrap();
+        assert!(json["baseline"]["full_frame"].is_object());
+        assert!(json["semdynreg"]["moving_object_crops"].is_object());
+        assert!(json.get("rigid").is_none(), "not compared: no key");
+        assert_eq!(json["methods"][1]["name"], "SEMDYNREG");
+        let back: Results = serde_json::from_value(json).unwrap();
+        assert_eq!(back, r);
+        let names: Vec<&str> = back.ordered().map(|(n, _)| n).collect();
+        assert_eq!(names, ["BASELINE", "SEMDYNREG"]);
     }
 }

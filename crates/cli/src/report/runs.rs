@@ -1,14 +1,15 @@
-//! The two training runs of `compare`: each is trained (or resumed, or reused when
+//! The training runs of `compare`, one per method of `methods::METHODS`: each is trained (or resumed, or reused when
 //! finished) and rendered by running this same executable's `train` and `render`
 //! subcommands, so that a run made by `compare` is exactly a run made by hand, and the
 //! recorded command lines reproduce it.
 
+use super::methods::{self, Method};
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use train::{checkpoint, run::RUN_FILE, TrainConfig};
 
-/// Settings shared by both runs (the same seed and schedule, issue 6).
+/// Settings shared by every run (the same seed and schedule, issue 6).
 #[derive(Clone, Debug)]
 pub struct TrainSettings {
     pub scene: PathBuf,
@@ -26,9 +27,29 @@ pub struct RunPlan {
     pub dir: PathBuf,
     /// The SemDynReg loss on (`--reg`) or off (`--no-reg`).
     pub reg: bool,
+    /// Each object as a rigid body with its own trajectory (`--objects`).
+    pub objects: bool,
     /// A run to fork from (`train --fork`) when it holds a checkpoint at the regularizer's
     /// fork point: SemDynReg starts from the baseline's instead of repeating its first quarter.
     pub fork_from: Option<PathBuf>,
+}
+
+impl RunPlan {
+    /// The run of `method` under `compare --out OUT`.
+    pub fn for_method(method: &Method, out: &Path) -> Self {
+        let t = method.training;
+        let fork_from = t.fork_from.map(|key| {
+            let from = methods::method(key).expect("METHODS forks from a listed method");
+            out.join(from.folder)
+        });
+        Self {
+            label: method.key,
+            dir: out.join(method.folder),
+            reg: t.reg,
+            objects: t.objects,
+            fork_from,
+        }
+    }
 }
 
 /// How far a run folder got.
@@ -95,6 +116,9 @@ pub fn train_args(
         a.extend(["--config".into(), c.display().to_string()]);
     }
     a.push(if plan.reg { "--reg" } else { "--no-reg" }.into());
+    if plan.objects {
+        a.push("--objects".into());
+    }
     a
 }
 
@@ -190,6 +214,7 @@ mod tests {
             label: "ours",
             dir: "out/semdynreg".into(),
             reg: true,
+            objects: false,
             fork_from: None,
         };
         let a = train_args(&plan, &s, RunState::Missing, None).join(" ");
@@ -221,6 +246,49 @@ mod tests {
             None,
         );
         assert_eq!(resume.join(" "), "train --out out/semdynreg --resume");
+    }
+
+    #[test]
+    fn each_method_has_its_plan() {
+        let out = Path::new("out");
+        let plans: Vec<RunPlan> = methods::METHODS
+            .iter()
+            .map(|m| RunPlan::for_method(m, out))
+            .collect();
+        let ours = &plans[1];
+        assert_eq!(ours.dir, out.join("semdynreg"));
+        assert!(ours.reg && !ours.objects);
+        assert_eq!(
+            ours.fork_from.as_deref(),
+            Some(out.join("baseline").as_path())
+        );
+        let rigid = &plans[2];
+        assert_eq!(
+            (rigid.label, rigid.dir.as_path()),
+            ("rigid", out.join("rigid").as_path())
+        );
+        assert!(!rigid.reg && rigid.objects && rigid.fork_from.is_none());
+        let s = TrainSettings {
+            scene: "sc".into(),
+            iters: None,
+            seed: 0,
+            config: None,
+            downscale: 1,
+            white_background: false,
+        };
+        assert_eq!(
+            train_args(rigid, &s, RunState::Missing, None).join(" "),
+            "train sc --seed 0 --downscale 1 --out out/rigid --no-reg --objects"
+        );
+        // A resumed run keeps the flags it was started with (its saved config).
+        let resumed = RunState::Unfinished {
+            iteration: 1,
+            total: 2,
+        };
+        assert_eq!(
+            train_args(rigid, &s, resumed, None).join(" "),
+            "train --out out/rigid --resume"
+        );
     }
 
     #[test]

@@ -1,13 +1,13 @@
 //! The paper's tables (Tables 1–2: SSIM, PSNR, LPIPS of a zoomed crop at t = 0…5 s and
-//! their average, baseline vs ours) as plain data, rendered as terminal text, Markdown
-//! and HTML.
+//! their average), one row per compared method in display order, as plain data, rendered
+//! as terminal text, Markdown and HTML.
 
-use super::results::{CropSeries, Results, Scores};
+use super::results::{CropSeries, MethodResults, Results, Scores};
 
-/// One metric block: a title row then a baseline row and an ours row.
+/// One metric block: a title row then one row per method (display name, cells).
 pub struct Block {
     pub title: &'static str,
-    pub rows: [(&'static str, Vec<String>); 2],
+    pub rows: Vec<(String, Vec<String>)>,
 }
 
 /// A table with a header (first cell is empty) and blocks.
@@ -34,10 +34,12 @@ const METRICS: [(&str, Getter); 3] = [
     ("LPIPS ↓", |s| s.lpips),
 ];
 
-/// The crop table of one object, baseline vs ours, per time step and averaged.
-pub fn crop_table(caption: String, base: &CropSeries, ours: &CropSeries) -> PaperTable {
+/// The crop table of one object: per time step and averaged, one row per (method, series).
+pub fn crop_table(caption: String, methods: &[(&str, &CropSeries)]) -> PaperTable {
     let mut header = vec![String::new()];
-    header.extend(base.per_time.iter().map(|p| format!("t={}s", p.t_seconds)));
+    if let Some((_, first)) = methods.first() {
+        header.extend(first.per_time.iter().map(|p| format!("t={}s", p.t_seconds)));
+    }
     header.push("Avg.".into());
     let row = |s: &CropSeries, get: Getter| {
         let mut cells: Vec<String> = s.per_time.iter().map(|p| fmt(get(&p.scores()))).collect();
@@ -48,7 +50,10 @@ pub fn crop_table(caption: String, base: &CropSeries, ours: &CropSeries) -> Pape
         .iter()
         .map(|&(title, get)| Block {
             title,
-            rows: [("Baseline", row(base, get)), ("Ours", row(ours, get))],
+            rows: methods
+                .iter()
+                .map(|(name, s)| (name.to_string(), row(s, get)))
+                .collect(),
         })
         .collect();
     PaperTable {
@@ -58,63 +63,71 @@ pub fn crop_table(caption: String, base: &CropSeries, ours: &CropSeries) -> Pape
     }
 }
 
-/// Full-frame scores and deformation consistency (all vehicles pooled, then the moving
-/// one alone, then the share of its motion its Gaussians follow), baseline vs ours.
+/// Full-frame scores and deformation consistency (all vehicles pooled, then each moving
+/// one alone, and the share of its motion its Gaussians follow), one row per method.
 pub fn summary_table(r: &Results) -> PaperTable {
-    let moving = &r.protocol.moving_object;
-    let cells = |m: &super::results::MethodResults| {
+    let moving = &r.protocol.moving_objects;
+    let cells = |m: &MethodResults| {
         let s = &m.full_frame;
-        vec![
+        let mut cells = vec![
             fmt(s.psnr),
             fmt(s.ssim),
             fmt(s.lpips),
             fmt(m.deformation_consistency_rms),
-            fmt(m.deformation_consistency_per_object.get(moving).copied()),
-            fmt(m.deformation_follow_per_object.get(moving).copied()),
-        ]
+        ];
+        for name in moving {
+            cells.push(fmt(m.deformation_consistency_per_object.get(name).copied()));
+            cells.push(fmt(m.deformation_follow_per_object.get(name).copied()));
+        }
+        cells
     };
-    let moving_header = format!("consistency RMS, {moving} ↓");
-    let follow_header = format!("motion followed, {moving} ↑");
+    let mut header: Vec<String> = ["", "PSNR (dB) ↑", "SSIM ↑", "LPIPS ↓", "consistency RMS ↓"]
+        .map(String::from)
+        .to_vec();
+    for name in moving {
+        header.push(format!("consistency RMS, {name} ↓"));
+        header.push(format!("motion followed, {name} ↑"));
+    }
     PaperTable {
         caption: "Full-frame test metrics and deformation consistency".into(),
-        header: vec![
-            String::new(),
-            "PSNR (dB) ↑".into(),
-            "SSIM ↑".into(),
-            "LPIPS ↓".into(),
-            "consistency RMS ↓".into(),
-            moving_header,
-            follow_header,
-        ],
+        header,
         blocks: vec![Block {
             title: "",
-            rows: [
-                ("Baseline", cells(&r.baseline)),
-                ("Ours", cells(&r.semdynreg)),
-            ],
+            rows: r
+                .ordered()
+                .map(|(name, m)| (name.to_string(), cells(m)))
+                .collect(),
         }],
     }
 }
 
-/// Every table of a results file: summary, moving object, then each static object.
+/// The crop series `pick` finds for each method that has it, with the method's name.
+fn crops_of<'a>(
+    r: &'a Results,
+    pick: impl Fn(&'a MethodResults) -> Option<&'a CropSeries>,
+) -> Vec<(&'a str, &'a CropSeries)> {
+    r.ordered()
+        .filter_map(|(name, m)| Some((name, pick(m)?)))
+        .collect()
+}
+
+/// Every table of a results file: summary, each moving object, then each static object.
 pub fn all_tables(r: &Results) -> Vec<PaperTable> {
     let mut tables = vec![summary_table(r)];
-    tables.push(crop_table(
-        format!(
-            "Zoomed moving object ({}) across time",
-            r.protocol.moving_object
-        ),
-        &r.baseline.moving_object_crop,
-        &r.semdynreg.moving_object_crop,
-    ));
-    for (name, base) in &r.baseline.static_object_crops {
-        if let Some(ours) = r.semdynreg.static_object_crops.get(name) {
-            tables.push(crop_table(
-                format!("Static object ({name}) across time"),
-                base,
-                ours,
-            ));
+    for name in &r.protocol.moving_objects {
+        let crops = crops_of(r, |m| m.moving_object_crops.get(name));
+        if !crops.is_empty() {
+            let caption = format!("Zoomed moving object ({name}) across time");
+            tables.push(crop_table(caption, &crops));
         }
+    }
+    let statics = r.ordered().next().map(|(_, m)| &m.static_object_crops);
+    for name in statics.into_iter().flat_map(|s| s.keys()) {
+        let crops = crops_of(r, |m| m.static_object_crops.get(name));
+        tables.push(crop_table(
+            format!("Static object ({name}) across time"),
+            &crops,
+        ));
     }
     tables
 }
@@ -127,7 +140,7 @@ impl PaperTable {
             for b in &self.blocks {
                 for (label, cells) in &b.rows {
                     let c = if i == 0 {
-                        label.to_string()
+                        label.clone()
                     } else {
                         cells[i - 1].clone()
                     };
@@ -158,7 +171,7 @@ impl PaperTable {
                 out.push_str(&format!("{}\n", b.title));
             }
             for (label, cells) in &b.rows {
-                let mut row = vec![*label];
+                let mut row = vec![label.as_str()];
                 row.extend(cells.iter().map(String::as_str));
                 out.push_str(&line(row));
                 out.push('\n');
@@ -206,7 +219,7 @@ impl PaperTable {
                 ));
             }
             for (label, cells) in &b.rows {
-                out.push_str(&format!("<tr><th>{label}</th>"));
+                out.push_str(&format!("<tr><th>{}</th>", escape(label)));
                 for c in cells {
                     out.push_str(&format!("<td>{}</td>", escape(c)));
                 }
@@ -224,4 +237,90 @@ pub fn escape(s: &str) -> String {
         .replace('<', "&lt;")
         .replace('>', "&gt;")
         .replace('"', "&quot;")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::report::methods::MethodName;
+    use crate::report::results::TimedScores;
+
+    fn series(psnr: f64) -> CropSeries {
+        let per_time = (0..6)
+            .map(|t| TimedScores {
+                t_seconds: t,
+                psnr: Some(psnr),
+                ssim: None,
+                lpips: None,
+                frame: format!("test/r_{t:03}"),
+                time: t as f32 / 6.0,
+                crop: None,
+            })
+            .collect();
+        CropSeries {
+            per_time,
+            mean: Scores {
+                psnr: Some(psnr),
+                ..Scores::default()
+            },
+        }
+    }
+
+    /// `methods` (key, name) with two moving objects (`a`, `b`) and one static (`s`).
+    fn results(methods: &[(&str, &str)]) -> Results {
+        let mut r = Results::default();
+        r.protocol.moving_objects = vec!["a".into(), "b".into()];
+        for (i, &(key, name)) in methods.iter().enumerate() {
+            let mut m = MethodResults::default();
+            for obj in ["a", "b"] {
+                m.moving_object_crops.insert(obj.into(), series(i as f64));
+            }
+            m.static_object_crops.insert("s".into(), series(10.0));
+            m.deformation_follow_per_object.insert("b".into(), 0.5);
+            r.by_method.insert(key.into(), m);
+            r.methods.push(MethodName {
+                key: key.into(),
+                name: name.into(),
+            });
+        }
+        r
+    }
+
+    #[test]
+    fn every_method_has_a_row_and_every_moving_object_a_table() {
+        let r = results(&[("baseline", "B"), ("semdynreg", "S"), ("rigid", "R")]);
+        let tables = all_tables(&r);
+        let captions: Vec<&str> = tables.iter().map(|t| t.caption.as_str()).collect();
+        assert_eq!(captions.len(), 4, "{captions:?}");
+        assert!(captions[1].contains("(a)") && captions[2].contains("(b)"));
+        assert!(captions[3].starts_with("Static object (s)"));
+        let summary = &tables[0];
+        assert_eq!(summary.header.len(), 5 + 2 * 2);
+        let rows = &summary.blocks[0].rows;
+        let labels: Vec<&str> = rows.iter().map(|(l, _)| l.as_str()).collect();
+        assert_eq!(labels, ["B", "S", "R"]);
+        assert_eq!(rows[2].1.last().unwrap(), "0.500", "b's motion followed");
+        for t in &tables[1..] {
+            for b in &t.blocks {
+                assert_eq!(b.rows.len(), 3);
+            }
+        }
+        // Rows follow the method order: the PSNR block of object a, rigid last.
+        assert_eq!(tables[1].blocks[1].rows[2].1[0], "2.000");
+        let text = tables[1].to_text();
+        assert!(text.contains("t=5s"), "{text}");
+        assert!(text.lines().any(|l| l.starts_with("R  ")), "{text}");
+    }
+
+    #[test]
+    fn two_methods_give_two_rows() {
+        let r = results(&[("baseline", "B"), ("semdynreg", "S")]);
+        for t in all_tables(&r) {
+            for b in &t.blocks {
+                assert_eq!(b.rows.len(), 2, "{}", t.caption);
+            }
+            let md = t.to_markdown();
+            assert!(md.contains("| B |") && md.contains("| S |"), "{md}");
+        }
+    }
 }

@@ -205,6 +205,10 @@ mod tests {
             cols: 2,
             data: (0..n).flat_map(|i| [i as f32, -(i as f32)]).collect(),
         });
+        // Rigid-object membership (`objects`): Gaussians 0..3 belong to object i % 3 (255 =
+        // the field's, i.e. none), the rest to the field.
+        let owner = |i: usize| if i < 3 { (i % 3) as u8 } else { 255 };
+        st.object = (0..n).map(owner).collect();
         // Gaussians 0..4 hot (0, 2, 4 small → clone; 1, 3 large → split); 5 transparent.
         for i in 0..5 {
             st.stats.grad_accum[i] = 1.0;
@@ -246,7 +250,13 @@ mod tests {
         for r in 0..st.len() {
             let id = st.model.sh[r * SH_FLOATS];
             assert_eq!(st.aux[0].data[r * 2..r * 2 + 2], [id, -id], "row {r}");
+            // Membership survives: a clone or split child belongs to its parent's object.
+            assert_eq!(st.object[r], owner(id as usize), "row {r}");
         }
+        assert!(
+            st.object.contains(&1),
+            "split object Gaussian 1 lives on in its children"
+        );
     }
 
     #[test]

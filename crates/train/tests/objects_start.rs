@@ -107,7 +107,8 @@ fn depth_check(tr: &Trainer) {
     let mut d = train::deform::Deformed::default();
     train::deform::apply(m, None, &mut d);
     let mut raster = splat::Rasterizer::new();
-    for f in [0usize, 20, 40, 60] {
+    let nt = tr.dataset.train.len();
+    for f in [0usize, nt / 4, nt / 2, 3 * nt / 4] {
         let frame = &tr.dataset.train[f];
         let cam = &frame.camera;
         let mut depth = train::objects::lift::render_depth(
@@ -197,7 +198,10 @@ fn recovered_trajectories_follow_the_true_motion() {
         cfg.objects.start_iter = v.parse().unwrap();
     }
     let start = cfg.objects.start_iter;
-    let mut tr = Trainer::new(cfg, ds, 0).unwrap();
+    let mut tr = match std::env::var("OBJECTS_CHECKPOINT") {
+        Ok(dir) => train::checkpoint::load_trainer(std::path::Path::new(&dir), ds).unwrap(),
+        Err(_) => Trainer::new(cfg, ds, 0).unwrap(),
+    };
     let t0 = std::time::Instant::now();
     while tr.iteration + 1 < start {
         tr.step().unwrap();
@@ -244,7 +248,8 @@ fn recovered_trajectories_follow_the_true_motion() {
             .collect();
         let m = tr.state.model.gather(&rows);
         let mut raster = splat::Rasterizer::new();
-        for f in [0usize, 24, 48, 71] {
+        let nt = tr.dataset.train.len();
+        for f in [0usize, nt / 3, 2 * nt / 3, nt - 1] {
             let frame = &tr.dataset.train[f];
             let view = train::objects::ObjectsView {
                 objects: std::slice::from_ref(o),
@@ -306,6 +311,24 @@ fn recovered_trajectories_follow_the_true_motion() {
         let index = gt.objects.iter().position(|g| g.id == o.id).unwrap();
         let moving = gt.objects[index].moving;
         let f = follow(o, &x, &gt, index);
+        if !o.is_static {
+            let tr = &o.trajectory;
+            for k in 0..4 {
+                eprintln!(
+                    "  knot {k} t {:.4} p {:.4?}",
+                    tr.times[k], tr.translations[k]
+                );
+            }
+            eprintln!("  t 0 → {:.4?}", tr.pose(0.0).p);
+            let k = tr.len();
+            for j in k - 3..k {
+                eprintln!(
+                    "  knot {j} t {:.4} p {:.4?}",
+                    tr.times[j], tr.translations[j]
+                );
+            }
+            eprintln!("  t 1 → {:.4?}", tr.pose(1.0).p);
+        }
         if o.is_static {
             let pose = o.trajectory.pose(0.5);
             let n = x.len() as f32;

@@ -24,10 +24,12 @@ impl DepthMap {
     }
 }
 
-/// Camera depth of the strongest contributor (largest `T·α`) of each pixel of the
-/// Gaussians `means/quats/scales/opacity` seen from `cam`; NaN where no Gaussian contributes
-/// at least `MIN_WEIGHT`. The strongest contributor, unlike the alpha-weighted mean depth,
-/// is not pulled towards the camera by faint floaters in front of a surface.
+/// Camera depth per pixel of the Gaussians `means/quats/scales/opacity` seen from `cam`:
+/// the depth of the strongest contributor (largest `T·α`) where it carries at least
+/// `STRONG` of the pixel, else the alpha-weighted mean depth where the pixel is at least
+/// `OPAQUE` covered, else NaN. The strongest contributor, unlike the mean, is not pulled
+/// towards the camera by faint floaters in front of a surface; the mean covers an early,
+/// still translucent model.
 pub fn render_depth(
     raster: &mut Rasterizer,
     means: &[f32],
@@ -36,29 +38,33 @@ pub fn render_depth(
     opacity_logits: &[f32],
     cam: &Camera,
 ) -> Result<DepthMap, splat::SplatError> {
-    const MIN_WEIGHT: f32 = 0.2;
-    let colors = vec![0.0f32; means.len()];
+    const STRONG: f32 = 0.2;
+    const OPAQUE: f32 = 0.3;
+    let z: Vec<f32> = means
+        .chunks_exact(3)
+        .flat_map(|m| [cam.to_camera([m[0], m[1], m[2]])[2]; 3])
+        .collect();
     let g = Gaussians {
         means,
         quats,
         scales,
         opacity_logits,
-        colors: Colors::Rgb(&colors),
+        colors: Colors::Rgb(&z),
     };
     let opts = RenderOptions {
         topk: 1,
         ..RenderOptions::default()
     };
     let out = raster.forward(&g, cam, &opts)?;
-    let depth = out
-        .topk_ids
-        .iter()
-        .zip(out.topk_weights)
-        .map(|(&id, &w)| {
-            if id == u32::MAX || w < MIN_WEIGHT {
-                f32::NAN
-            } else {
+    let depth = (0..out.alpha.len())
+        .map(|p| {
+            let (id, w, a) = (out.topk_ids[p], out.topk_weights[p], out.alpha[p]);
+            if id != u32::MAX && w >= STRONG {
                 out.depths[id as usize]
+            } else if a >= OPAQUE {
+                out.image[p * 3] / a
+            } else {
+                f32::NAN
             }
         })
         .collect();
@@ -165,8 +171,8 @@ pub fn lift(
         m.opacity_logits.push(inverse_sigmoid(0.5));
         let k = ((y * inp.cam.width + x) * 3) as usize;
         let mut sh = [0.0f32; SH_FLOATS];
-        for c in 0..3 {
-            sh[c] = (inp.image[k + c] - 0.5) / SH_C0;
+        for (s, &v) in sh.iter_mut().zip(&inp.image[k..k + 3]) {
+            *s = (v - 0.5) / SH_C0;
         }
         m.sh.extend(sh);
     }

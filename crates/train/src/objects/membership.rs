@@ -103,9 +103,9 @@ impl Membership {
             rows.iter().for_each(|&r| valid[r as usize] = true);
         }
         let mut moved = Vec::new();
-        for i in 0..state.len() {
+        for (i, &ok) in valid.iter().enumerate() {
             let from = state.object[i];
-            if from == NO_OBJECT && !valid[i] {
+            if from == NO_OBJECT && !ok {
                 continue;
             }
             let row = &state.aux[vi].data[i * cols..(i + 1) * cols];
@@ -140,5 +140,27 @@ fn convert(state: &mut GaussianState, i: usize, o: &RigidObject, at: &StepPlacem
     for (a, w) in state.adam.iter_mut().zip(crate::model::ROWS) {
         a.m[i * w..(i + 1) * w].fill(0.0);
         a.v[i * w..(i + 1) * w].fill(0.0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The resolution rule of the module docs: the largest share wins if it holds
+    /// `share` of all votes (background included) and `min_weight`; otherwise no one.
+    #[test]
+    fn votes_elect_the_majority_object_or_none() {
+        let map: &[u8] = &[2, 7, 255];
+        let m = Membership::new([map], 3, 0.6, 1.0);
+        assert_eq!(m.cols(), 3, "objects 2 and 7, then the background");
+        assert_eq!(m.elected(&[3.0, 0.5, 0.5]), Some(2));
+        assert_eq!(m.elected(&[0.5, 2.0, 0.5]), Some(7));
+        // Voted into two objects with no majority (a shared silhouette edge): neither.
+        assert_eq!(m.elected(&[1.5, 1.4, 0.1]), None);
+        // Mostly background: stays where it is.
+        assert_eq!(m.elected(&[1.0, 0.0, 2.0]), None);
+        // Too few votes in all to decide.
+        assert_eq!(m.elected(&[0.5, 0.0, 0.1]), None);
     }
 }

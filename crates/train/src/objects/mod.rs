@@ -238,8 +238,10 @@ impl RigidObjects {
             &self.rows,
             model,
             &self.poses,
-            g_means,
-            g_quats,
+            place::WorldGrads {
+                means: g_means,
+                quats: g_quats,
+            },
             canon,
             &mut self.grads,
         );

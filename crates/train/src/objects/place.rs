@@ -62,6 +62,12 @@ pub fn place(
     }
 }
 
+/// The rasterizer's gradients of the placed (world-space) means and quaternions.
+pub struct WorldGrads<'a> {
+    pub means: &'a [f32],
+    pub quats: &'a [f32],
+}
+
 /// Chains the rasterizer's world-space gradients of the object rows back to their
 /// object-frame parameters (overwriting `canon`'s means and quats there; `canon.log_scales`
 /// from `deform::backward` is already right) and adds the pose gradients into `traj_grads`.
@@ -70,11 +76,11 @@ pub fn backward(
     rows: &[Vec<u32>],
     model: &GaussianModel,
     poses: &[Pose],
-    g_means: &[f32],
-    g_quats: &[f32],
+    world: WorldGrads<'_>,
     canon: &mut CanonicalGrads,
     traj_grads: &mut [TrajectoryGrad],
 ) {
+    let (g_means, g_quats) = (world.means, world.quats);
     for (((o, rows), pose), tg) in objects.iter().zip(rows).zip(poses).zip(traj_grads) {
         let mut g = PoseGrad::default();
         let mut g_r = [[0.0f64; 3]; 3];
@@ -95,13 +101,13 @@ pub fn backward(
             let du = quat::mul(r_conj, gq);
             canon.quats[i * 4..i * 4 + 4].copy_from_slice(&quat::normalize_vjp(u, norm, du));
             let dr = quat::mul(gq, quat::conj(u));
-            for k in 0..4 {
-                g.q[k] += f64::from(dr[k]);
+            for (q, d) in g.q.iter_mut().zip(dr) {
+                *q += f64::from(d);
             }
         }
         let from_r = quat::to_matrix_vjp(pose.q, &g_r);
-        for k in 0..4 {
-            g.q[k] += from_r[k];
+        for (q, d) in g.q.iter_mut().zip(from_r) {
+            *q += d;
         }
         if !o.is_static {
             o.trajectory.accumulate(pose, &g, tg);
@@ -175,8 +181,10 @@ mod tests {
             &rows,
             &m,
             &poses,
-            &w,
-            &v,
+            WorldGrads {
+                means: &w,
+                quats: &v,
+            },
             &mut canon,
             &mut tg,
         );

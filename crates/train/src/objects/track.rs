@@ -12,7 +12,7 @@
 use super::contact;
 use super::gauge;
 use super::knots::KnotAdam;
-use super::lift::DepthMap;
+use super::lift::{self, DepthMap};
 use super::place::{self, NO_OBJECT};
 use super::trajectory::{Trajectory, TrajectoryGrad};
 use super::{ObjectsConfig, RigidObject};
@@ -147,16 +147,18 @@ impl<'a> Tracker<'a> {
             &self.rows,
             &self.model,
             &poses,
-            &gr.means,
-            &gr.quats,
+            place::WorldGrads {
+                means: &gr.means,
+                quats: &gr.quats,
+            },
             &mut self.canon,
             &mut tg,
         );
         if let Some(target) = self.springs.get(v).copied().flatten() {
             let p = self.object.trajectory.translations[v];
             let g = contact::spring_grad(p, view.cam.center(), target, self.cfg.contact_weight);
-            for c in 0..3 {
-                tg[0].translations[v][c] += g[c];
+            for (t, g) in tg[0].translations[v].iter_mut().zip(g) {
+                *t += g;
             }
         }
         if pose {
@@ -375,6 +377,34 @@ impl<'a> Tracker<'a> {
         still.then_some(s)
     }
 
+    /// The first guess of the object's distance, read in every view instead of the first
+    /// alone: the median over views of (median background depth around its mask) / (its
+    /// origin's depth), applied as the gauge. The lift put the origin at the first view's
+    /// reading; one view's surroundings are a noisy measure, all views' less so.
+    pub fn ring_gauge(&mut self) {
+        let tr = &self.object.trajectory;
+        let mut r: Vec<f32> = Vec::new();
+        for (k, v) in self.views.iter().enumerate() {
+            let Some(bg) = v.background else { continue };
+            let Some(d) = lift::ring_depth(bg, v.id_map, self.object.id, self.cfg.ring_px) else {
+                continue;
+            };
+            let z = v.cam.to_camera(tr.translations[k])[2];
+            if z > 0.0 {
+                r.push(d / z);
+            }
+        }
+        if r.is_empty() {
+            return;
+        }
+        let mid = r.len() / 2;
+        r.select_nth_unstable_by(mid, f32::total_cmp);
+        let s = r[mid].clamp(0.5, 2.0);
+        let centres: Vec<[f32; 3]> = self.views.iter().map(|v| v.cam.center()).collect();
+        gauge::apply_scale(&mut self.model, &mut self.object.trajectory, &centres, s);
+        self.scale *= s;
+    }
+
     /// Makes the object static under the gauge `s`: one pose, from the middle view.
     pub fn hold_still(&mut self, s: f32) {
         let centres: Vec<[f32; 3]> = self.views.iter().map(|v| v.cam.center()).collect();
@@ -480,6 +510,7 @@ pub fn fit(
         }
     }
     let (_, mut t) = best.expect("at least one thickness (validated)");
+    t.ring_gauge();
     t.settle_contact(1.0, rng)?;
     Ok(t.finish())
 }

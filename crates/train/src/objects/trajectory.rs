@@ -155,8 +155,8 @@ impl Trajectory {
             let (ui, ni) = quat::normalize(&self.rotations[i]);
             let dk = d_raw.map(|v| v * w * s);
             let d = quat::normalize_vjp(ui, ni, dk);
-            for k in 0..4 {
-                out.rotations[i][k] += f64::from(d[k]);
+            for (r, d) in out.rotations[i].iter_mut().zip(d) {
+                *r += f64::from(d);
             }
         }
     }

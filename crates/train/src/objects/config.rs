@@ -29,6 +29,11 @@ pub struct ObjectsConfig {
     /// turns less than `static_angle_deg`) is static: one fixed pose.
     pub static_motion: f32,
     pub static_angle_deg: f32,
+    /// And only if that still copy stands where the scene around its silhouette is: its
+    /// ring ratio (background depth around the mask / its depth, median over views) within
+    /// this factor of 1. A camera moving along the object's path cannot otherwise tell a
+    /// moving object from a static one at another depth (docs/objects.md).
+    pub static_ring_tolerance: f32,
     /// Tracking (time-progressive fitting): iterations of pose fitting per new frame, and of
     /// shape/appearance refinement on already tracked frames after each new frame.
     pub track_pose_iters: u32,
@@ -82,6 +87,7 @@ impl Default for ObjectsConfig {
             ring_px: 3,
             static_motion: 0.25,
             static_angle_deg: 10.0,
+            static_ring_tolerance: 1.6,
             track_pose_iters: 30,
             track_shape_iters: 10,
             track_refine_iters: 1000,
@@ -126,6 +132,12 @@ impl ObjectsConfig {
             ("objects.lr_translation", self.lr_translation),
             ("objects.lr_rotation", self.lr_rotation),
         ];
+        if !(self.static_ring_tolerance.is_finite() && self.static_ring_tolerance > 1.0) {
+            return Err(format!(
+                "objects.static_ring_tolerance must be finite and > 1, got {}",
+                self.static_ring_tolerance
+            ));
+        }
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
                 return Err(format!("{name} must be finite and > 0, got {v}"));

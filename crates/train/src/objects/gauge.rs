@@ -78,15 +78,6 @@ pub fn occlusion_scale(
         pixels = ratios.len(),
         "occlusion ratios"
     );
-    eprintln!(
-        "DEBUG ratios q01 {} q03 {} q10 {} q25 {} q50 {} n {}",
-        q(0.01),
-        q(0.03),
-        q(0.1),
-        q(0.25),
-        q(0.5),
-        ratios.len()
-    );
     Ok(Some(q(quantile)))
 }
 

@@ -372,16 +372,25 @@ impl<'a> Tracker<'a> {
         self.residual_motion = rms;
         let (_, angle) = tr.motion_extent();
         let c = self.cfg;
+        // A camera moving along an object's path sees the same images from the object
+        // moving and from a static copy at another depth: the least-motion gauge cannot tell
+        // them apart. What is around the silhouette can: the static copy must stand where
+        // that scene is (its ring ratio near 1), not far in front of it or behind it.
+        let placed = self.ring_ratio().is_none_or(|r| {
+            let off = (r / s).ln().abs();
+            off <= c.static_ring_tolerance.ln()
+        });
         let still = tr.len() < 2
-            || (rms < c.static_motion * size * s && angle.to_degrees() < c.static_angle_deg);
+            || (rms < c.static_motion * size * s
+                && angle.to_degrees() < c.static_angle_deg
+                && placed);
         still.then_some(s)
     }
 
-    /// The first guess of the object's distance, read in every view instead of the first
-    /// alone: the median over views of (median background depth around its mask) / (its
-    /// origin's depth), applied as the gauge. The lift put the origin at the first view's
-    /// reading; one view's surroundings are a noisy measure, all views' less so.
-    pub fn ring_gauge(&mut self) {
+    /// The median over views of (median background depth around the mask) / (the origin's
+    /// camera depth): 1 when the object stands where the scene around its silhouette is.
+    /// None when no view sees a background around it.
+    fn ring_ratio(&self) -> Option<f32> {
         let tr = &self.object.trajectory;
         let mut r: Vec<f32> = Vec::new();
         for (k, v) in self.views.iter().enumerate() {
@@ -389,17 +398,25 @@ impl<'a> Tracker<'a> {
             let Some(d) = lift::ring_depth(bg, v.id_map, self.object.id, self.cfg.ring_px) else {
                 continue;
             };
-            let z = v.cam.to_camera(tr.translations[k])[2];
+            let z = v.cam.to_camera(tr.translations[k.min(tr.len() - 1)])[2];
             if z > 0.0 {
                 r.push(d / z);
             }
         }
         if r.is_empty() {
-            return;
+            return None;
         }
         let mid = r.len() / 2;
         r.select_nth_unstable_by(mid, f32::total_cmp);
-        let s = r[mid].clamp(0.5, 2.0);
+        Some(r[mid])
+    }
+
+    /// The first guess of the object's distance, read in every view instead of the first
+    /// alone: [`Self::ring_ratio`] applied as the gauge. The lift put the origin at the first
+    /// view's reading; one view's surroundings are a noisy measure, all views' less so.
+    pub fn ring_gauge(&mut self) {
+        let Some(r) = self.ring_ratio() else { return };
+        let s = r.clamp(0.5, 2.0);
         let centres: Vec<[f32; 3]> = self.views.iter().map(|v| v.cam.center()).collect();
         gauge::apply_scale(&mut self.model, &mut self.object.trajectory, &centres, s);
         self.scale *= s;

@@ -38,6 +38,12 @@ pub enum TrainError {
     Hook(String),
     #[error("data set problem: {0}")]
     Data(String),
+    #[error("this run has no rigid objects to select from: --only, --without and --per-object need a checkpoint of a run trained with --objects (baseline and SemDynReg (paper) runs store no per-Gaussian objects)")]
+    NoObjects,
+    #[error("this run has no object `{name}`; its objects (name or ID): {known}, and `background` (the deformable rest)")]
+    UnknownObject { name: String, known: String },
+    #[error("{0}")]
+    EmptySelection(String),
     #[error("rasterizer: {0}")]
     Splat(#[from] splat::SplatError),
 }

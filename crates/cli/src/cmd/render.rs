@@ -1,8 +1,10 @@
-//! `semdynreg render RUN [--split test] [--time T] [--iteration N]`: PNGs of a split's
-//! cameras from the latest checkpoint (or iteration N's), each at its own time or all at
-//! time T, into `RUN/renders/<split>/` (`RUN/renders/iter_NNNNNNN/<split>/` with
-//! `--iteration`), named after the frame (`r_007.png`, or `r_007_t0.500.png` with `--time`).
-//! Also holds [`LoadedRun`], shared by `eval` and `export`.
+//! `semdynreg render RUN [--split test] [--time T] [--iteration N] [--only|--without
+//! NAME,…]`: PNGs of a split's cameras from the latest checkpoint (or iteration N's), each
+//! at its own time or all at time T, into `RUN/renders/<split>/`
+//! (`RUN/renders/iter_NNNNNNN/<split>/` with `--iteration`; `<split>_only-NAME…/` or
+//! `<split>_without-NAME…/` with a selection of objects), named after the frame
+//! (`r_007.png`, or `r_007_t0.500.png` with `--time`). Also holds [`LoadedRun`], shared by
+//! `eval` and `export`.
 
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
@@ -10,6 +12,11 @@ use train::render::{EvalReport, Renderer};
 use train::{checkpoint, DeformField, GaussianModel, TrainConfig};
 
 /// PNGs of a split's cameras from a run's latest (or chosen) checkpoint.
+///
+/// They go to `RUN/renders/<split>/`. With --only or --without (runs trained with
+/// --objects) they go to `RUN/renders/<split>_only-NAME[+NAME…]/` (or `_without-…`), so the
+/// full renders are never overwritten; e.g. `--only white-suv` renders the white SUV alone
+/// over the background colour, `--without background` every object and nothing else.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Run folder made by `semdynreg train`.
@@ -24,6 +31,8 @@ pub struct Args {
     /// `RUN/renders/iter_NNNNNNN/<split>/`.
     #[arg(long)]
     pub iteration: Option<u32>,
+    #[command(flatten)]
+    pub select: super::select::SelectArgs,
 }
 
 /// Where a command that reads a checkpoint writes its outputs: `RUN/<what>` for the
@@ -68,6 +77,32 @@ impl LoadedRun {
             dataset,
             renderer: Renderer::default(),
         })
+    }
+
+    /// Keeps only the Gaussians `sel` keeps (the model shrinks to them, with their column).
+    pub fn keep(&mut self, sel: &train::objects::Selection) {
+        let (model, column) = sel.apply(&self.model, &self.column);
+        self.model = model;
+        self.column = column;
+    }
+
+    /// The selection of `--only/--without` applied to the run; None without them.
+    pub fn select(
+        &mut self,
+        args: &super::select::SelectArgs,
+    ) -> Result<Option<train::objects::Selection>> {
+        let sel = args.resolve(&self.objects)?;
+        if let Some(s) = &sel {
+            let total = self.model.len();
+            self.keep(s);
+            let kept = self.model.len();
+            let what = super::select::describe(s);
+            if kept == 0 {
+                bail!("{what}: the selection keeps none of the {total} Gaussians");
+            }
+            println!("{what}: {kept} of {total} Gaussians");
+        }
+        Ok(sel)
     }
 
     pub fn split(&self, name: &str) -> Result<&[scene::Frame]> {
@@ -119,7 +154,11 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     let frames = r.split(&a.split)?.to_vec();
-    let dir = output_dir(&a.run, "renders", a.iteration).join(&a.split);
+    let folder = match r.select(&a.select)? {
+        Some(s) => format!("{}_{}", a.split, s.label()),
+        None => a.split.clone(),
+    };
+    let dir = output_dir(&a.run, "renders", a.iteration).join(folder);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let bg = r.dataset.background;
     for (i, fr) in frames.iter().enumerate() {

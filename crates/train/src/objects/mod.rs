@@ -18,9 +18,13 @@
 //!   the gradients back, [`mask_loss`] adds the alpha-against-mask term, [`knots`] steps
 //!   the trajectories;
 //! - densification keeps the column aligned (children inherit their parent's object).
+//!
+//! After training, [`select`] turns named objects (and `background`) into the rows render
+//! and export keep, and [`export`] writes one object in its own frame with its trajectory.
 
 pub mod config;
 pub mod contact;
+pub mod export;
 pub mod gauge;
 pub mod knots;
 pub mod lift;
@@ -28,6 +32,7 @@ pub mod mask_loss;
 pub mod membership;
 pub mod place;
 pub mod regauge;
+pub mod select;
 pub mod start;
 pub mod store;
 pub mod track;
@@ -35,6 +40,7 @@ pub mod trajectory;
 
 pub use config::ObjectsConfig;
 pub use place::NO_OBJECT;
+pub use select::{SelectMode, Selection};
 pub use trajectory::{Pose, Trajectory};
 
 use crate::adam::AdamHyper;

@@ -52,6 +52,19 @@ impl Pose {
         [v[0] + self.p[0], v[1] + self.p[1], v[2] + self.p[2]]
     }
 
+    /// The row-major 4×4 object-to-world matrix `[[R, p], [0, 0, 0, 1]]` (the convention of
+    /// toycars' objects.json).
+    pub fn to_matrix(&self) -> [[f32; 4]; 4] {
+        let r = &self.r;
+        let p = self.p;
+        [
+            [r[0][0], r[0][1], r[0][2], p[0]],
+            [r[1][0], r[1][1], r[1][2], p[1]],
+            [r[2][0], r[2][1], r[2][2], p[2]],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    }
+
     /// World → object frame.
     pub fn invert(&self, x: [f32; 3]) -> [f32; 3] {
         quat::rotate_inv(
@@ -230,6 +243,14 @@ mod tests {
         for c in 0..3 {
             assert!((back[c] - x[c]).abs() < 1e-5);
         }
+        // The 4×4 matrix maps points as `apply` does.
+        let m = pose.to_matrix();
+        let y = pose.apply(x);
+        for (r, row) in m.iter().enumerate().take(3) {
+            let v = row[0] * x[0] + row[1] * x[1] + row[2] * x[2] + row[3];
+            assert!((v - y[r]).abs() < 1e-6);
+        }
+        assert_eq!(m[3], [0.0, 0.0, 0.0, 1.0]);
     }
 
     /// The knot gradients of `L = w·p(t) + v·q(t)` match finite differences.

@@ -198,6 +198,20 @@ fn compare_trains_three_runs_and_reports_every_key() {
     assert!(key(&c, "rms").as_f64().is_some_and(f64::is_finite));
     assert!(key(&c, "per_object.white-suv.follow").as_f64().is_some());
     assert!(key(&c, "per_object.green-suv.follow").is_null(), "parked");
+    assert!(key(&c, "rigidity_rms").as_f64().is_some_and(f64::is_finite));
+    assert!(key(&c, "per_object.white-suv.rigidity_rms")
+        .as_f64()
+        .is_some());
+    // The rigidity residual is measured for every run, rigid objects included.
+    for run in ["baseline", "semdynreg", "rigid"] {
+        let r = key(&results, &format!("{run}.rigidity_rms"));
+        assert!(
+            r.as_f64().is_some_and(|r| r.is_finite() && r >= 0.0),
+            "{run}: {r}"
+        );
+        let per = key(&results, &format!("{run}.rigidity_rms_per_object"));
+        assert!(per.as_object().unwrap().contains_key("white-suv"), "{run}");
+    }
     older_checkpoints_are_scored_apart(&base);
 }
 

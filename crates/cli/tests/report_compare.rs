@@ -136,6 +136,7 @@ fn check_method_keys(results: &Value, method: &str, statics: usize) {
         "moving_object_crop.mean.ssim",
         "moving_object_crop.mean.lpips",
         "deformation_consistency_rms",
+        "rigidity_rms",
     ] {
         get(m, k);
     }

@@ -23,6 +23,9 @@ pub struct HookContext<'a> {
     pub topk_weights: &'a [f32],
     /// This iteration's deformation (zero for Gaussians the field was not evaluated on).
     pub delta: &'a DeformOutput,
+    /// The model's canonical means (`N·3`), the points `δx` moves: a field Gaussian's
+    /// deformed mean is `means + δx` (rigid objects are placed by their poses instead).
+    pub means: &'a [f32],
     /// Ascending indices of the Gaussians the field was evaluated on (`[field]
     /// visible_only`); the others have δ = 0 and no field gradient this iteration.
     pub field_rows: &'a [u32],

@@ -361,6 +361,7 @@ impl Trainer {
                 topk_ids: out.topk_ids,
                 topk_weights: out.topk_weights,
                 delta: &ws.delta,
+                means: &model.means,
                 field_rows: &ws.rows,
             };
             extra_loss = h

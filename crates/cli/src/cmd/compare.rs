@@ -4,7 +4,7 @@
 //! crops at t = 0…5 s), written to `DIR/results.json`, `DIR/report.md` and
 //! `DIR/report.html`, with the paper-style tables printed.
 
-use crate::report::consistency::run_consistency;
+use crate::report::consistency::{run_consistency, VehicleMetrics};
 use crate::report::evaluate::{evaluate_run, EvalSet, RenderDir, RunEval};
 use crate::report::figure::{self, FigureMethod};
 use crate::report::methods::{Method, METHODS};
@@ -17,7 +17,6 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use train::regularizer::ConsistencyReport;
 
 /// Baseline, SemDynReg and rigid objects on a scene: results.json, report.md, report.html.
 #[derive(clap::Args, Debug)]
@@ -324,7 +323,11 @@ fn protocol(
 
 /// Fills the consistency fields of `res` from the trained run, or says in `notes` why not.
 fn add_consistency(res: &mut MethodResults, run: &Path, set: &EvalSet, notes: &mut Vec<String>) {
-    let Some(r) = consistency(run, notes) else {
+    let Some(VehicleMetrics {
+        consistency: r,
+        rigidity,
+    }) = consistency(run, notes)
+    else {
         return;
     };
     res.deformation_consistency_rms = Some(r.rms);
@@ -338,6 +341,12 @@ fn add_consistency(res: &mut MethodResults, run: &Path, set: &EvalSet, notes: &m
         .iter()
         .filter_map(|x| Some((object_name(set, x.object), x.follow()?)))
         .collect();
+    res.rigidity_rms = Some(rigidity.rms);
+    res.rigidity_rms_per_object = rigidity
+        .per_object
+        .iter()
+        .map(|x| (object_name(set, x.object), x.rms))
+        .collect();
 }
 
 /// The name `objects.json` gives object `id` (its number when it has none).
@@ -348,8 +357,8 @@ fn object_name(set: &EvalSet, id: u8) -> String {
         .map_or_else(|| id.to_string(), |o| o.name.clone())
 }
 
-/// The run's consistency report, or `None` with the reason added to `notes`.
-fn consistency(run: &Path, notes: &mut Vec<String>) -> Option<ConsistencyReport> {
+/// The run's consistency and rigidity reports, or `None` with the reason added to `notes`.
+fn consistency(run: &Path, notes: &mut Vec<String>) -> Option<VehicleMetrics> {
     match run_consistency(run, None) {
         Ok(r) => Some(r),
         Err(e) => {

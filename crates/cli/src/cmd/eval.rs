@@ -3,7 +3,8 @@
 //! written atomically to `RUN/eval/metrics.json` (`RUN/eval/iter_NNNNNNN/` with
 //! `--iteration`; `{"mean": {...}, "frames": [...]}`). On a toycars scene (one
 //! with `objects.json`), also the deformation consistency against the vehicles' true motion
-//! and the share of it each moving vehicle's Gaussians follow (`RUN/eval/consistency.json`).
+//! the share of it each moving vehicle's Gaussians follow, and the rigidity residual of each
+//! vehicle's Gaussians (how rigidly they move together; `RUN/eval/consistency.json`).
 
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
@@ -79,10 +80,19 @@ fn consistency(run: &Path, iteration: Option<u32>, out_dir: &Path) -> Result<()>
     };
     let out = out_dir.join("consistency.json");
     scene::io::write_json(&out, &v).with_context(|| format!("writing {}", out.display()))?;
-    let mut parts = vec![format!("RMS {:.4}", v["rms"].as_f64().unwrap_or(f64::NAN))];
+    let num = |x: &serde_json::Value| x.as_f64().unwrap_or(f64::NAN);
+    let mut parts = vec![format!(
+        "RMS {:.4}, rigidity RMS {:.4}",
+        num(&v["rms"]),
+        num(&v["rigidity_rms"])
+    )];
     for (name, o) in v["per_object"].as_object().into_iter().flatten() {
         if let Some(f) = o["follow"].as_f64() {
-            parts.push(format!("{name} follows {:.0} % of its motion", 100.0 * f));
+            parts.push(format!(
+                "{name} follows {:.0} % of its motion (rigidity RMS {:.4})",
+                100.0 * f,
+                num(&o["rigidity_rms"])
+            ));
         }
     }
     println!(

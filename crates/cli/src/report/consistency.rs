@@ -1,10 +1,13 @@
-//! `deformation_consistency_rms` of a trained run (issue 6): the metric is defined and
-//! computed by `train::regularizer::consistency`; this file only feeds it from a run folder.
+//! `deformation_consistency_rms` (issue 6) and the rigidity residual of a trained run: the
+//! metrics are defined and computed by `train::regularizer::consistency` and
+//! `train::regularizer::rigidity`; this file only feeds them from a run folder.
 //!
 //! Choices: the vehicle groups are built once, at the earliest test frame (`t_ref`), from
 //! the top-k (k of the regularizer's default config) of the run's render at `t_ref` and the
 //! ground-truth mask of that view; every vehicle (moving and static) is tracked; errors are
-//! taken at every test frame with the field evaluated on all Gaussians.
+//! taken at every test frame with the field evaluated on all Gaussians (rigid objects of an
+//! `--objects` run placed by their trajectories). Both metrics use the same groups and the
+//! same positions.
 
 use anyhow::{bail, Context, Result};
 use scene::objects::ObjectsFile;
@@ -13,8 +16,10 @@ use splat::{Colors, Gaussians, Rasterizer, RenderOptions};
 use std::path::Path;
 use train::checkpoint::LoadedModel;
 use train::model::{GaussianModel, SH_COEFFS};
+use train::regularizer::rigidity::Attached;
 use train::regularizer::{
-    ConsistencyAccumulator, ConsistencyReport, ObjectGroups, ObjectTrack, RegConfig, TopKView,
+    ConsistencyAccumulator, ConsistencyReport, ObjectGroups, ObjectTrack, RegConfig,
+    RigidityAccumulator, RigidityReport, TopKView,
 };
 use train::render::deformed_model;
 use train::{checkpoint, run::RunInfo, DeformField};
@@ -53,9 +58,17 @@ fn at_time(m: &LoadedModel, field: &mut Option<DeformField>, t: f32) -> Gaussian
     deformed_model(&m.model, field.as_mut(), m.objects_view(), t)
 }
 
-/// The metric for the latest checkpoint of `run` (or iteration's), over its scene's test
+/// Both vehicle metrics of one run.
+pub struct VehicleMetrics {
+    /// How far the vehicles' Gaussians stray from the true rigid motion.
+    pub consistency: ConsistencyReport,
+    /// How rigidly they move together, whatever the motion.
+    pub rigidity: RigidityReport,
+}
+
+/// The metrics for the latest checkpoint of `run` (or iteration's), over its scene's test
 /// frames.
-pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<ConsistencyReport> {
+pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetrics> {
     let info = RunInfo::load(run)?;
     let ds = info
         .dataset()
@@ -96,6 +109,7 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<Consistency
     };
     let pose_ref = pose(reference)?;
     let mut acc = ConsistencyAccumulator::new();
+    let mut rigidity = RigidityAccumulator::new();
     for f in &test {
         let pose_t = pose(f)?;
         let deformed = at_time(&loaded, &mut field, f.time);
@@ -112,14 +126,26 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<Consistency
             });
         }
         acc.add_time(f.time, &tracks, &anchor.means, &deformed.means)?;
+        let attached: Vec<Attached> = tracks
+            .iter()
+            .map(|t| Attached {
+                object: t.object,
+                members: t.members,
+            })
+            .collect();
+        rigidity.add_time(f.time, &attached, &anchor.means, &deformed.means)?;
     }
-    Ok(acc.report()?)
+    Ok(VehicleMetrics {
+        consistency: acc.report()?,
+        rigidity: rigidity.report()?,
+    })
 }
 
 /// [`run_consistency`] with object names, as JSON for `semdynreg eval`
-/// (`RUN/eval/consistency.json`): `rms`, `per_time`, and per vehicle `rms`, `rms_if_still`
-/// and `follow` (`null` for a vehicle that does not move). `None` when the run's scene has
-/// no `objects.json` (not a toycars scene).
+/// (`RUN/eval/consistency.json`): `rms`, `per_time`, `rigidity_rms` (pooled),
+/// `rigidity_per_time`, and per vehicle `rms`, `rms_if_still`, `follow` (`null` for a
+/// vehicle that does not move) and `rigidity_rms`. `None` when the run's scene has no
+/// `objects.json` (not a toycars scene).
 pub fn named_consistency(run: &Path, iteration: Option<u32>) -> Result<Option<serde_json::Value>> {
     let info = RunInfo::load(run)?;
     let objects_path = info.scene.join("objects.json");
@@ -127,7 +153,17 @@ pub fn named_consistency(run: &Path, iteration: Option<u32>) -> Result<Option<se
         return Ok(None);
     }
     let objects = ObjectsFile::load(&objects_path)?;
-    let r = run_consistency(run, iteration)?;
+    let VehicleMetrics {
+        consistency: r,
+        rigidity,
+    } = run_consistency(run, iteration)?;
+    let rigid_of = |id: u8| {
+        rigidity
+            .per_object
+            .iter()
+            .find(|o| o.object == id)
+            .map(|o| o.rms)
+    };
     let name = |id: u8| {
         objects
             .objects
@@ -140,12 +176,13 @@ pub fn named_consistency(run: &Path, iteration: Option<u32>) -> Result<Option<se
         .iter()
         .map(|o| {
             let v = serde_json::json!({"rms": o.rms, "rms_if_still": o.rms_if_still,
-                "follow": o.follow()});
+                "follow": o.follow(), "rigidity_rms": rigid_of(o.object)});
             (name(o.object), v)
         })
         .collect();
     Ok(Some(serde_json::json!({
         "rms": r.rms, "per_object": per_object, "per_time": r.per_time,
+        "rigidity_rms": rigidity.rms, "rigidity_per_time": rigidity.per_time,
         "checkpoint": checkpoint::select(run, iteration)?.display().to_string(),
     })))
 }

@@ -157,6 +157,8 @@ pub fn evaluate_run(
         deformation_consistency_rms: None,
         deformation_consistency_per_object: Default::default(),
         deformation_follow_per_object: Default::default(),
+        rigidity_rms: None,
+        rigidity_rms_per_object: Default::default(),
         renders: renders.0.display().to_string(),
     };
     Ok(RunEval {

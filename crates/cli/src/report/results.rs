@@ -78,6 +78,17 @@ pub struct MethodResults {
     /// `train::regularizer::consistency`). Vehicles that do not move have no entry.
     #[serde(default)]
     pub deformation_follow_per_object: BTreeMap<String, f64>,
+    /// Rigidity residual (world units, lower is better; `train::regularizer::rigidity`): per
+    /// test time, the RMS residual of the best rigid fit from the vehicle Gaussians'
+    /// positions at the reference time to their positions then, pooled over the vehicles,
+    /// averaged over test times. Whether they move *together* (a flip-book that stands
+    /// still scores 0 too; `deformation_follow_per_object` says whether they move *with*
+    /// the vehicle). `null` when not computed (see `notes`).
+    #[serde(default)]
+    pub rigidity_rms: Option<f64>,
+    /// The same per vehicle (keyed by its name in `objects.json`). Empty when not computed.
+    #[serde(default)]
+    pub rigidity_rms_per_object: BTreeMap<String, f64>,
     /// Where the rendered frames came from.
     pub renders: String,
 }

@@ -63,8 +63,9 @@ pub fn crop_table(caption: String, methods: &[(&str, &CropSeries)]) -> PaperTabl
     }
 }
 
-/// Full-frame scores and deformation consistency (all vehicles pooled, then each moving
-/// one alone, and the share of its motion its Gaussians follow), one row per method.
+/// Full-frame scores, deformation consistency and rigidity residual (all vehicles pooled,
+/// then each moving one alone: consistency, the share of its motion its Gaussians follow,
+/// and their rigidity residual), one row per method.
 pub fn summary_table(r: &Results) -> PaperTable {
     let moving = &r.protocol.moving_objects;
     let cells = |m: &MethodResults| {
@@ -74,19 +75,29 @@ pub fn summary_table(r: &Results) -> PaperTable {
             fmt(s.ssim),
             fmt(s.lpips),
             fmt(m.deformation_consistency_rms),
+            fmt(m.rigidity_rms),
         ];
         for name in moving {
             cells.push(fmt(m.deformation_consistency_per_object.get(name).copied()));
             cells.push(fmt(m.deformation_follow_per_object.get(name).copied()));
+            cells.push(fmt(m.rigidity_rms_per_object.get(name).copied()));
         }
         cells
     };
-    let mut header: Vec<String> = ["", "PSNR (dB) ↑", "SSIM ↑", "LPIPS ↓", "consistency RMS ↓"]
-        .map(String::from)
-        .to_vec();
+    let mut header: Vec<String> = [
+        "",
+        "PSNR (dB) ↑",
+        "SSIM ↑",
+        "LPIPS ↓",
+        "consistency RMS ↓",
+        "rigidity RMS ↓",
+    ]
+    .map(String::from)
+    .to_vec();
     for name in moving {
         header.push(format!("consistency RMS, {name} ↓"));
         header.push(format!("motion followed, {name} ↑"));
+        header.push(format!("rigidity RMS, {name} ↓"));
     }
     PaperTable {
         caption: "Full-frame test metrics and deformation consistency".into(),
@@ -277,6 +288,8 @@ mod tests {
             }
             m.static_object_crops.insert("s".into(), series(10.0));
             m.deformation_follow_per_object.insert("b".into(), 0.5);
+            m.rigidity_rms = Some(0.125);
+            m.rigidity_rms_per_object.insert("a".into(), 0.25);
             r.by_method.insert(key.into(), m);
             r.methods.push(MethodName {
                 key: key.into(),
@@ -295,11 +308,17 @@ mod tests {
         assert!(captions[1].contains("(a)") && captions[2].contains("(b)"));
         assert!(captions[3].starts_with("Static object (s)"));
         let summary = &tables[0];
-        assert_eq!(summary.header.len(), 5 + 2 * 2);
+        assert_eq!(summary.header.len(), 6 + 3 * 2);
+        assert_eq!(summary.header[5], "rigidity RMS ↓");
+        assert_eq!(summary.header[8], "rigidity RMS, a ↓");
         let rows = &summary.blocks[0].rows;
         let labels: Vec<&str> = rows.iter().map(|(l, _)| l.as_str()).collect();
         assert_eq!(labels, ["B", "S", "R"]);
-        assert_eq!(rows[2].1.last().unwrap(), "0.500", "b's motion followed");
+        let r_cells = &rows[2].1;
+        assert_eq!(r_cells[4], "0.125", "pooled rigidity");
+        assert_eq!(r_cells[9], "0.500", "b's motion followed");
+        assert_eq!(r_cells[7], "0.250", "a's rigidity");
+        assert_eq!(r_cells[10], "n/a", "b's rigidity not measured");
         for t in &tables[1..] {
             for b in &t.blocks {
                 assert_eq!(b.rows.len(), 3);

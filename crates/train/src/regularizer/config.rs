@@ -46,6 +46,10 @@ pub struct RegConfig {
     /// Persistent membership: and when that weight is at least this much (Σ of `T·α`
     /// over the pixels where it was in the top-k of `o`).
     pub persist_min_weight: f32,
+    /// Which per-object consistency loss: the paper's spread of δ around its mean
+    /// ([`ConsistencyMode::Paper`]) or the residual of the best rigid fit
+    /// ([`ConsistencyMode::Rigid`], beyond the paper).
+    pub consistency: ConsistencyMode,
 }
 
 /// Where the members of an object's group come from (docs/architecture.md, "SemDynReg" item 5).
@@ -59,6 +63,33 @@ pub enum Membership {
     /// iteration) whose top-k weight, accumulated over all earlier active iterations, is
     /// mostly on `o`. Pulls along Gaussians that left the object's mask (trailing ghosts).
     Persistent,
+}
+
+/// The per-object loss `L_reg^(o)` (docs/regularizer.md, "Rigid-aware consistency").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase", try_from = "String")]
+pub enum ConsistencyMode {
+    /// Paper Sec. 3.4: `λx·mean‖δx_i − δx̄_o‖² + λr·… + λs·…` over non-static objects.
+    #[default]
+    Paper,
+    /// Our extension: `λx·min_{R,t} mean‖(x_i + δx_i) − (R x_i + t)‖²` over every object
+    /// (`rigid_loss`), zero for any rigid motion of the group, a turn included.
+    Rigid,
+}
+
+impl TryFrom<String> for ConsistencyMode {
+    type Error = String;
+
+    /// Names the key, so that a bad value in a `[reg]` section says where it is.
+    fn try_from(s: String) -> Result<Self, String> {
+        match s.as_str() {
+            "paper" => Ok(Self::Paper),
+            "rigid" => Ok(Self::Rigid),
+            _ => Err(format!(
+                "`consistency` must be \"paper\" or \"rigid\", got \"{s}\""
+            )),
+        }
+    }
 }
 
 impl Default for RegConfig {
@@ -78,6 +109,7 @@ impl Default for RegConfig {
             membership: Membership::View,
             persist_share: 0.5,
             persist_min_weight: 1.0,
+            consistency: ConsistencyMode::Paper,
         }
     }
 }
@@ -209,5 +241,22 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("persist_share"));
+    }
+
+    #[test]
+    fn consistency_mode_round_trips_and_bad_values_name_the_key() {
+        assert_eq!(RegConfig::default().consistency, ConsistencyMode::Paper);
+        let c: RegConfig = toml::from_str("consistency = \"rigid\"").unwrap();
+        assert_eq!(c.consistency, ConsistencyMode::Rigid);
+        let text = toml::to_string(&c).unwrap();
+        assert!(text.contains("consistency = \"rigid\""), "{text}");
+        assert_eq!(toml::from_str::<RegConfig>(&text).unwrap(), c);
+        let paper = toml::to_string(&RegConfig::default()).unwrap();
+        assert!(paper.contains("consistency = \"paper\""), "{paper}");
+        let err = toml::from_str::<RegConfig>("consistency = \"Rigid\"").unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.contains("`consistency` must be"), "{msg}");
+        assert!(msg.contains("\"Rigid\""), "{msg}");
+        assert!(toml::from_str::<RegConfig>("consistency = 3").is_err());
     }
 }

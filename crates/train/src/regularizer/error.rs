@@ -2,6 +2,8 @@
 
 use thiserror::Error;
 
+use super::rigid_fit::FitError;
+
 /// Everything that can go wrong when grouping Gaussians or evaluating the regularizer.
 /// Each variant names the buffer and the sizes involved so the caller's message is actionable.
 #[derive(Debug, Error, Clone, PartialEq)]
@@ -40,4 +42,8 @@ pub enum RegError {
     },
     #[error("no vehicle Gaussians were evaluated: deformation consistency is undefined")]
     NoConsistencySamples,
+    #[error("no vehicle Gaussians were evaluated: the rigidity residual is undefined")]
+    NoRigiditySamples,
+    #[error("object {object}: {source}")]
+    RigidFit { object: u8, source: FitError },
 }

@@ -92,7 +92,10 @@ impl DeformHook for SemanticHook {
             }),
             None => None,
         };
-        self.last = self.reg.apply(topk, id_map, deform, &mut grad, persist)?;
+        let means = ctx.means;
+        self.last = self
+            .reg
+            .apply(topk, id_map, means, deform, &mut grad, persist)?;
         Ok(self.last.weighted)
     }
 }

@@ -47,8 +47,10 @@ pub struct RegLoss {
     pub skipped: usize,
 }
 
-/// Evaluate `L_reg` over `groups` for the offsets `deform`, add `d(λ·L_reg)/dδ` into `grad`
-/// when given, and write one [`ObjectStats`] per group into `stats` (cleared first).
+/// Evaluate the paper's `L_reg` over `groups` for the offsets `deform`, add `d(λ·L_reg)/dδ`
+/// into `grad` when given, and write one [`ObjectStats`] per group into `stats` (cleared
+/// first). This is always the paper's loss: `cfg.consistency` is not read here
+/// ([`super::Regularizer`] dispatches; the rigid loss is [`super::rigid_loss::evaluate_rigid`]).
 pub fn evaluate(
     groups: &ObjectGroups,
     deform: DeformView<'_>,
@@ -76,6 +78,11 @@ pub fn evaluate(
     out.l_reg = l_reg as f32;
     out.weighted = (f64::from(cfg.lambda) * l_reg) as f32;
     Ok(out)
+}
+
+/// The paper's per-object statistics of one group (no gradient), for the rigid loss's log.
+pub(super) fn paper_stats(group: Group<'_>, d: DeformView<'_>, cfg: &RegConfig) -> ObjectStats {
+    object_pass(group, d, cfg, None)
 }
 
 /// Means of δx, δr, δs over one group (f64 for accuracy over up to N members; zero-padded).
@@ -122,6 +129,7 @@ fn object_pass(
         loss: loss as f32,
         skipped,
         persistent: 0,
+        rigid_residual: None,
     }
 }
 
@@ -203,7 +211,7 @@ fn centered(v: &[f32], m: &[f64; 4], scale: f64, grad: Option<&mut [f32]>) -> f6
     sq
 }
 
-fn check_deform(d: DeformView<'_>, groups_n: usize) -> Result<usize, RegError> {
+pub(super) fn check_deform(d: DeformView<'_>, groups_n: usize) -> Result<usize, RegError> {
     let n = d.dx.len() / 3;
     check_len("dx", d.dx.len(), 3, n)?;
     check_len("dr", d.dr.len(), 4, n)?;
@@ -217,7 +225,7 @@ fn check_deform(d: DeformView<'_>, groups_n: usize) -> Result<usize, RegError> {
     Ok(n)
 }
 
-fn check_grad(g: &DeformGradMut<'_>, n: usize) -> Result<(), RegError> {
+pub(super) fn check_grad(g: &DeformGradMut<'_>, n: usize) -> Result<(), RegError> {
     check_len("grad dx", g.dx.len(), 3, n)?;
     check_len("grad dr", g.dr.len(), 4, n)?;
     check_len("grad ds", g.ds.len(), 3, n)

@@ -11,11 +11,12 @@
 //! }
 //! ```
 
-use super::config::{Membership, RegConfig};
+use super::config::{ConsistencyMode, Membership, RegConfig};
 use super::error::RegError;
 use super::grouping::{ObjectGroups, TopKView};
 use super::loss::{evaluate, DeformGradMut, DeformView, RegLoss};
 use super::membership::MembershipVotes;
+use super::rigid_loss::evaluate_rigid;
 use super::stats::ObjectStats;
 
 #[derive(Clone, Debug)]
@@ -80,11 +81,13 @@ impl Regularizer {
     /// Group the view's Gaussians by object, evaluate `λ·L_reg` and add its gradient into
     /// `grad` (the trainer's dL/dδ, before the field backward). With persistent membership
     /// and `persist` given, this view's top-k first votes, then the groups take in the
-    /// persistent members.
+    /// persistent members. `means` are the canonical means (`N·3`), read only with
+    /// `consistency = "rigid"`.
     pub fn apply(
         &mut self,
         topk: TopKView<'_>,
         id_map: &[u8],
+        means: &[f32],
         deform: DeformView<'_>,
         grad: &mut DeformGradMut<'_>,
         persist: Option<Persist<'_>>,
@@ -102,7 +105,13 @@ impl Regularizer {
             }
             _ => self.groups.build(topk, k, id_map, n)?,
         }
-        let loss = evaluate(&self.groups, deform, &self.cfg, Some(grad), &mut self.stats)?;
+        let (groups, cfg, stats) = (&self.groups, &self.cfg, &mut self.stats);
+        let loss = match cfg.consistency {
+            ConsistencyMode::Paper => evaluate(groups, deform, cfg, Some(grad), stats)?,
+            ConsistencyMode::Rigid => {
+                evaluate_rigid(groups, means, deform, cfg, Some(grad), stats)?
+            }
+        };
         if let Some(mv) = &self.membership {
             for s in &mut self.stats {
                 s.persistent = mv.members_of(s.object).len() as u32;
@@ -112,6 +121,7 @@ impl Regularizer {
             l_reg = loss.l_reg,
             active = loss.active,
             skipped = loss.skipped,
+            mode = ?self.cfg.consistency,
             "SemDynReg"
         );
         Ok(loss)
@@ -163,6 +173,7 @@ mod tests {
                     stride: 2,
                 },
                 &[5, 5],
+                &[0.0; 9],
                 deform,
                 &mut grad,
                 None,

@@ -12,14 +12,15 @@ pub struct SelectArgs {
     /// Keep only these parts of a run trained with --objects: object names as the run
     /// names them (e.g. `white-suv`; case does not matter), object IDs, or the pseudo-name
     /// `background` (the deformable rest: every Gaussian of no object). Several names go
-    /// space- or comma-separated after one flag, or in repeated flags. E.g. `--only
-    /// white-suv` renders the car alone over the background colour. An unknown name is an
-    /// error that lists the run's objects.
+    /// space- or comma-separated after one flag, or in repeated flags (put the run folder
+    /// before the flag). E.g. `--only white-suv` keeps the car alone (rendered over the
+    /// background colour, or exported as its Gaussians only). An unknown name is an error
+    /// that lists the run's objects.
     #[arg(long, value_name = "NAME", num_args = 1.., value_delimiter = ',',
         conflicts_with = "without", value_parser = NonEmptyStringValueParser::new())]
     pub only: Vec<String>,
     /// Keep everything but these parts (names, IDs or `background`, as for --only). E.g.
-    /// `--without white-suv` renders the scene without the moving car, `--without
+    /// `--without white-suv` keeps the scene without the moving car, `--without
     /// background` the objects alone.
     #[arg(long, value_name = "NAME", num_args = 1.., value_delimiter = ',',
         value_parser = NonEmptyStringValueParser::new())]

@@ -527,7 +527,9 @@ pub fn fit(
         }
     }
     let (_, mut t) = best.expect("at least one thickness (validated)");
-    t.ring_gauge();
+    if cfg.ring_gauge {
+        t.ring_gauge();
+    }
     t.settle_contact(1.0, rng)?;
     Ok(t.finish())
 }

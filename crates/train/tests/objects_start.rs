@@ -1,9 +1,16 @@
 //! The rigid objects' start (lift, track, gauge) on a scene with ground-truth poses: how
-//! much of each object's true motion its recovered trajectory follows.
+//! much of each object's true motion its recovered trajectory follows (docs/objects.md,
+//! "The start alone"). A diagnostic, not a pass/fail test: it prints, per object, whether it
+//! was found static, the follow of its trajectory, the follow under the best common factor
+//! (what a perfect gauge would give), and per-knot errors.
 //!
 //! `OBJECTS_SCENE=DIR` (a toycars scene with `semantics/` made by `semdynreg segment DIR
-//! --masks gt --labels gt`), optionally `OBJECTS_ITERS` (the schedule, default 3000) and
-//! `OBJECTS_POINTS` (random init, default 20000):
+//! --masks gt --labels gt`), optionally `OBJECTS_ITERS` (the schedule, default 3000),
+//! `OBJECTS_POINTS` (random init, default 20000), `OBJECTS_START` (start iteration),
+//! `OBJECTS_SH`, `OBJECTS_THICK=a,b,c`, `OBJECTS_CONTACT`, `OBJECTS_POSE`/`SHAPE`/`REFINE`
+//! (tracking iterations), `OBJECTS_CHECKPOINT=DIR` (start from a checkpoint),
+//! `OBJECTS_DEPTH_CHECK=1` (rendered vs true ground depth behind each mask; with
+//! `OBJECTS_EXPECTED_DEPTH=1` the alpha-weighted mean depth instead):
 //! `cargo test --release -p train --test objects_start -- --ignored --nocapture`
 
 use scene::objects::ObjectsFile;

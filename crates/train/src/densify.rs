@@ -32,24 +32,7 @@ fn normal(rng: &mut impl Rng) -> f32 {
 /// Rotation matrix of a (normalized) w,x,y,z quaternion, row-major.
 fn rotation(q: &[f32]) -> [[f32; 3]; 3] {
     let n = (q.iter().map(|v| v * v).sum::<f32>()).sqrt().max(1e-12);
-    let (w, x, y, z) = (q[0] / n, q[1] / n, q[2] / n, q[3] / n);
-    [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ]
+    crate::quat::to_matrix([q[0] / n, q[1] / n, q[2] / n, q[3] / n])
 }
 
 /// Clone small Gaussians and split large ones whose mean view-space gradient reaches the

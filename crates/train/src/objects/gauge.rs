@@ -188,31 +188,23 @@ mod tests {
             log_scales: vec![-3.0; 6],
             ..Default::default()
         };
-        let before: Vec<_> = (0..2)
-            .flat_map(|k| {
-                let pose = tr.pose(k as f32);
-                let cam = &cams[k];
-                (0..2)
-                    .map(|i| {
-                        cam.project(pose.apply([0, 1, 2].map(|c| model.means[i * 3 + c])))
-                            .unwrap()
-                    })
-                    .collect::<Vec<_>>()
-            })
-            .collect();
+        // Every Gaussian's pixel in every view.
+        let pixels = |model: &GaussianModel, tr: &Trajectory| -> Vec<_> {
+            (0..2)
+                .flat_map(|k| {
+                    let pose = tr.pose(k as f32);
+                    (0..2)
+                        .map(|i| {
+                            let x = [0, 1, 2].map(|c| model.means[i * 3 + c]);
+                            cams[k].project(pose.apply(x)).unwrap()
+                        })
+                        .collect::<Vec<_>>()
+                })
+                .collect()
+        };
+        let before = pixels(&model, &tr);
         apply_scale(&mut model, &mut tr, &centres, 1.5);
-        let after: Vec<_> = (0..2)
-            .flat_map(|k| {
-                let pose = tr.pose(k as f32);
-                let cam = &cams[k];
-                (0..2)
-                    .map(|i| {
-                        cam.project(pose.apply([0, 1, 2].map(|c| model.means[i * 3 + c])))
-                            .unwrap()
-                    })
-                    .collect::<Vec<_>>()
-            })
-            .collect();
+        let after = pixels(&model, &tr);
         for (b, a) in before.iter().zip(&after) {
             assert!((b.0[0] - a.0[0]).abs() < 1e-3 && (b.0[1] - a.0[1]).abs() < 1e-3);
             assert!((a.1 - 1.5 * b.1).abs() < 1e-4);

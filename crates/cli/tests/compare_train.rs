@@ -10,6 +10,7 @@ use std::process::Command;
 
 fn semdynreg(args: &[&str]) {
     let out = Command::new(env!("CARGO_BIN_EXE_semdynreg"))
+        .env("SEMDYNREG_OFFLINE", "1")
         .args(args)
         .env("SEMDYNREG_WEIGHTS", "/nonexistent-weights-dir")
         .output()
@@ -24,6 +25,7 @@ fn semdynreg(args: &[&str]) {
 /// Runs `semdynreg ARGS`, which must fail; returns its stderr.
 fn semdynreg_err(args: &[&str]) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_semdynreg"))
+        .env("SEMDYNREG_OFFLINE", "1")
         .args(args)
         .output()
         .expect("run semdynreg");

@@ -10,6 +10,7 @@ use std::process::{Command, Output};
 
 fn semdynreg_out(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_semdynreg"))
+        .env("SEMDYNREG_OFFLINE", "1")
         .args(args)
         .env("SEMDYNREG_WEIGHTS", "/nonexistent-weights-dir")
         .output()

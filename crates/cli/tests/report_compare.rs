@@ -78,6 +78,7 @@ struct Compared {
 fn compare_renders(tmp: &Path, scene_dir: &Path, renders: &[(&str, &Path)]) -> Compared {
     let out = tmp.join("cmp");
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_semdynreg"));
+    cmd.env("SEMDYNREG_OFFLINE", "1");
     cmd.arg("compare").arg(scene_dir).arg("--out").arg(&out);
     for (method, dir) in renders {
         cmd.arg(format!("--{method}-renders")).arg(dir);
@@ -363,6 +364,7 @@ fn compare_names_a_missing_render() {
     let base = tmp.path().join("base");
     write_renders(&ds, 0, 10, &base);
     let output = Command::new(env!("CARGO_BIN_EXE_semdynreg"))
+        .env("SEMDYNREG_OFFLINE", "1")
         .args(["compare", scene_dir.to_str().unwrap(), "--out"])
         .arg(tmp.path().join("cmp"))
         .arg("--baseline-renders")

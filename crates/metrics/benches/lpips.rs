@@ -2,7 +2,7 @@
 //! process: a 1024³ f32 `gemm` on all threads (2.15 GFLOP), i.e. the machine's achievable
 //! GEMM rate, since LPIPS is ~9.4 GFLOP of convolutions for AlexNet at this size and our
 //! convolutions are im2col + the same `gemm`.
-//! Needs the weights (`scripts/fetch_lpips.sh weights`; `SEMDYNREG_WEIGHTS`); without them
+//! Needs the weights (`semdynreg weights fetch lpips`; `SEMDYNREG_WEIGHTS`); without them
 //! only the reference runs, with a printed note.
 //!
 //! Run: `cargo bench -p metrics --bench lpips -- --warm-up-time 1 --measurement-time 5`

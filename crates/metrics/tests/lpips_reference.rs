@@ -6,7 +6,7 @@
 //! round to those three decimals, and to stay within 2e-5 of the values that the earlier,
 //! independent candle `conv2d` implementation gave (0.72188, 0.13757), which pins the
 //! convolution, pooling and normalization code far tighter than three decimals do.
-//! Needs the real weights (`scripts/fetch_lpips.sh DIR`, `SEMDYNREG_WEIGHTS=DIR`) and
+//! Needs the real weights (`semdynreg weights fetch lpips --dir DIR`, `SEMDYNREG_WEIGHTS=DIR`) and
 //! the example images in `tests/fixtures/lpips` (README there: source and licence); skips
 //! with a printed reason when the weights are absent (the images are always there).
 

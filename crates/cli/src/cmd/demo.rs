@@ -46,6 +46,10 @@ pub struct Args {
     /// CLIP weights (safetensors) for `--id-maps sam-clip`.
     #[arg(long)]
     pub clip: Option<PathBuf>,
+    /// Never fetch missing weights (default: the LPIPS weights, and MobileSAM's for `--id-maps sam|sam-clip`, are fetched on first use
+    /// with pip, `semdynreg weights fetch`); also `SEMDYNREG_OFFLINE=1`.
+    #[arg(long)]
+    pub offline: bool,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -64,7 +68,13 @@ fn s(v: impl ToString) -> String {
 
 /// Builds `SCENE/semantics/` and returns a sentence saying which maps were used.
 fn id_maps(scene: &str, a: &Args) -> Result<String> {
-    let mut cmd = vec![s("segment"), s(scene), s("--dict"), s(DICTIONARY)];
+    let mut cmd = vec![
+        s("segment"),
+        s(scene),
+        s("--dict"),
+        s(DICTIONARY),
+        s("--offline"),
+    ];
     let sam = semantics::sam::default_checkpoint();
     let source = match a.id_maps {
         IdMaps::Gt => {
@@ -117,6 +127,11 @@ pub fn run(a: Args) -> Result<()> {
             s(a.drive),
         ])?;
     }
+    let mut needed = vec![&crate::weights::catalog::LPIPS_ALEX];
+    if a.id_maps != IdMaps::Gt {
+        needed.push(&crate::weights::catalog::MOBILE_SAM);
+    }
+    crate::weights::ensure("demo", &needed, a.offline);
     let source = id_maps(&scene_s, &a)?;
     println!("object-ID maps: {source}");
     let config = a.out.join("demo.toml");
@@ -133,6 +148,8 @@ pub fn run(a: Args) -> Result<()> {
         s(a.seed),
         s("--config"),
         s(config.display()),
+        // Weights were fetched above (or declined): compare must not try again.
+        s("--offline"),
     ])?;
     println!("object-ID maps used for training: {source}");
     Ok(())

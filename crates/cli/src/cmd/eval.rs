@@ -27,6 +27,10 @@ pub struct Args {
     /// Skip the deformation-consistency metric of toycars scenes.
     #[arg(long)]
     pub no_consistency: bool,
+    /// Never fetch missing weights (default: the LPIPS weights are fetched on first use
+    /// with pip, `semdynreg weights fetch`); also `SEMDYNREG_OFFLINE=1`.
+    #[arg(long)]
+    pub offline: bool,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -35,6 +39,7 @@ pub fn run(a: Args) -> Result<()> {
     let (net, lpips_text) = if a.no_lpips {
         (None, "not computed (--no-lpips)".to_string())
     } else {
+        crate::weights::ensure("eval", &[&crate::weights::catalog::LPIPS_ALEX], a.offline);
         crate::report::scorer::load_lpips()?
     };
     let mut score = net.as_ref().map(|n| {

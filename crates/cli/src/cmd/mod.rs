@@ -12,3 +12,4 @@ pub mod segment;
 pub mod select;
 pub mod synth;
 pub mod train;
+pub mod weights;

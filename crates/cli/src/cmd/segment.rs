@@ -15,7 +15,7 @@ pub enum Labels {
     Gt,
 }
 
-#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Masks {
     Sam,
     Gt,
@@ -71,6 +71,10 @@ pub struct Args {
     /// Recompute even when the cache matches.
     #[arg(long)]
     pub force: bool,
+    /// Never fetch missing weights (default: MobileSAM's checkpoint is fetched on first use
+    /// with pip when --sam is not given, `semdynreg weights fetch`); also `SEMDYNREG_OFFLINE=1`.
+    #[arg(long)]
+    pub offline: bool,
 }
 
 fn generator(a: &Args) -> MaskGenConfig {
@@ -95,6 +99,13 @@ pub fn run(a: Args) -> Result<()> {
     // SAFETY: the dispatcher calls this first, before the command starts any thread (the
     // progress bar's and rayon's come later), so nothing else touches the environment.
     unsafe { semantics::sam::set_thread_count_env() };
+    if a.masks == Masks::Sam && a.sam.is_none() {
+        crate::weights::ensure(
+            "segment",
+            &[&crate::weights::catalog::MOBILE_SAM],
+            a.offline,
+        );
+    }
     let gen = generator(&a);
     let opts = SegmentOptions {
         dictionary: a

@@ -9,7 +9,7 @@
 //! (no bias), is averaged over space, and the five layers are summed.
 //!
 //! Weights: `lpips_alex.safetensors` / `lpips_vgg.safetensors` written by
-//! `scripts/fetch_lpips.sh` (PyTorch layout: `net.conv{i}.weight` OIHW, `net.conv{i}.bias`,
+//! `semdynreg weights fetch lpips` (PyTorch layout: `net.conv{i}.weight` OIHW, `net.conv{i}.bias`,
 //! `lin{j}.weight` (1, C, 1, 1)), found in `$SEMDYNREG_WEIGHTS`, default `./weights`.
 
 mod conv;
@@ -141,7 +141,7 @@ impl ConvSpec {
 #[derive(Debug, thiserror::Error)]
 pub enum LpipsError {
     /// The weights file is absent.
-    #[error("LPIPS weights not found at {path} (run scripts/fetch_lpips.sh DIR and set {WEIGHTS_ENV}=DIR)")]
+    #[error("LPIPS weights not found at {path} (run `semdynreg weights fetch lpips --dir DIR` and set {WEIGHTS_ENV}=DIR)")]
     NotFound { path: PathBuf },
     /// The weights file is unreadable or lacks a tensor of the expected shape.
     #[error("LPIPS weights {path}: {reason}")]
@@ -186,7 +186,7 @@ impl Lpips {
         Self::load(net, &weights_dir().join(net.file_name()))
     }
 
-    /// Loads `net`'s weights from a safetensors file written by `scripts/fetch_lpips.sh`.
+    /// Loads `net`'s weights from a safetensors file written by `semdynreg weights fetch`.
     pub fn load(net: LpipsNet, path: &Path) -> Result<Self, LpipsError> {
         if !path.is_file() {
             return Err(LpipsError::NotFound {

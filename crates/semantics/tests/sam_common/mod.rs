@@ -14,7 +14,7 @@ pub fn mobile_sam_path() -> Option<PathBuf> {
         Some(p)
     } else {
         eprintln!(
-            "SKIPPED: {} absent (run scripts/fetch_mobilesam.sh weights, or set SEMDYNREG_WEIGHTS)",
+            "SKIPPED: {} absent (run `semdynreg weights fetch`, or set SEMDYNREG_WEIGHTS)",
             p.display()
         );
         None

@@ -33,7 +33,9 @@ impl Adam {
     }
 
     /// One update of `params` with `grads`; `lr_of(k)` gives the rate of element `k`
-    /// within a row of `row` floats (lets SH DC and SH rest share one buffer).
+    /// within a row of `row` floats (lets SH DC and SH rest share one buffer). Returns
+    /// whether every updated parameter is finite (the trainer's divergence check, free
+    /// here: the values are in registers; `crate::finite` then names the culprit).
     pub fn step_rows(
         &mut self,
         params: &mut [f32],
@@ -41,7 +43,7 @@ impl Adam {
         hp: AdamHyper,
         row: usize,
         lr_of: impl Fn(usize) -> f32,
-    ) {
+    ) -> bool {
         debug_assert_eq!(params.len(), grads.len());
         debug_assert_eq!(params.len(), self.m.len());
         self.step += 1;
@@ -60,22 +62,25 @@ impl Adam {
             .zip(grads.par_chunks(chunk))
             .zip(self.m.par_chunks_mut(chunk))
             .zip(self.v.par_chunks_mut(chunk))
-            .for_each(|(((p, g), m), v)| {
+            .map(|(((p, g), m), v)| {
                 if row == 1 {
-                    update(p, g, m, v, |_| lrs[0], &k);
+                    update(p, g, m, v, |_| lrs[0], &k)
                 } else {
                     let rows = p.chunks_exact_mut(row).zip(g.chunks_exact(row));
                     let moments = m.chunks_exact_mut(row).zip(v.chunks_exact_mut(row));
+                    let mut ok = true;
                     for ((p, g), (m, v)) in rows.zip(moments) {
-                        update(p, g, m, v, |j| lrs[j], &k);
+                        ok &= update(p, g, m, v, |j| lrs[j], &k);
                     }
+                    ok
                 }
-            });
+            })
+            .reduce(|| true, |a, b| a && b)
     }
 
     /// Same as [`Adam::step_rows`] with one rate for every element.
-    pub fn step(&mut self, params: &mut [f32], grads: &[f32], hp: AdamHyper, lr: f32) {
-        self.step_rows(params, grads, hp, 1, |_| lr);
+    pub fn step(&mut self, params: &mut [f32], grads: &[f32], hp: AdamHyper, lr: f32) -> bool {
+        self.step_rows(params, grads, hp, 1, |_| lr)
     }
 
     pub fn retain(&mut self, row: usize, keep: &[bool]) {
@@ -118,7 +123,8 @@ fn flush_subnormal(x: f32) -> f32 {
     }
 }
 
-/// Adam on one run of elements; `lr(j)` is the rate of element `j` of the run.
+/// Adam on one run of elements; `lr(j)` is the rate of element `j` of the run. Returns
+/// whether every updated parameter is finite.
 #[inline(always)]
 fn update(
     p: &mut [f32],
@@ -127,8 +133,9 @@ fn update(
     v: &mut [f32],
     lr: impl Fn(usize) -> f32,
     k: &StepConsts,
-) {
+) -> bool {
     let (b1, b2) = (k.hp.beta1, k.hp.beta2);
+    let mut ok = true;
     for j in 0..p.len() {
         let gj = g[j];
         let mj = flush_subnormal(b1 * m[j] + (1.0 - b1) * gj);
@@ -136,8 +143,11 @@ fn update(
         m[j] = mj;
         v[j] = vj;
         let denom = vj.sqrt() * k.inv_sqrt_bc2 + k.hp.eps;
-        p[j] -= lr(j) * k.inv_bc1 * mj / denom;
+        let pj = p[j] - lr(j) * k.inv_bc1 * mj / denom;
+        p[j] = pj;
+        ok &= pj.is_finite();
     }
+    ok
 }
 
 /// 3DGS `get_expon_lr_func` without delay: log-linear from `init` to `end` over `max_steps`.

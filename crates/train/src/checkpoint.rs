@@ -1,8 +1,10 @@
 //! Checkpoints of a run: `RUN/checkpoints/iter_NNNNNNN/` holding the canonical Gaussians as
 //! a 3DGS PLY, everything else that evolves (field weights, Adam moments and steps,
 //! densification statistics, epoch order, RNG position) as safetensors, and the resolved
-//! config. A checkpoint is written in a hidden folder and renamed into place, then
-//! `RUN/checkpoints/latest` is replaced atomically, so an interrupted save is never "latest".
+//! config, plus `checksums.json` (a CRC-32 per file and per tensor, verified on every load:
+//! [`crate::integrity`]). A checkpoint is written in a hidden folder and renamed into place,
+//! then `RUN/checkpoints/latest` is replaced atomically, so an interrupted save is never
+//! "latest". A state with a non-finite value is never saved ([`crate::finite`]).
 
 use crate::adam::Adam;
 use crate::config::TrainConfig;
@@ -19,7 +21,9 @@ use safetensors::{Dtype, SafeTensors};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-const FORMAT: &str = "semdynreg-train-1";
+/// `-2`: the folder carries `checksums.json`; `-1` (before it) still loads, unverified.
+const FORMAT: &str = "semdynreg-train-2";
+const FORMAT_UNVERIFIED: &str = "semdynreg-train-1";
 const GROUPS: [&str; 5] = ["means", "quats", "log_scales", "opacity", "sh"];
 pub const PLY_NAME: &str = "point_cloud.ply";
 pub const STATE_NAME: &str = "state.safetensors";
@@ -118,17 +122,29 @@ fn state_bytes(tr: &Trainer) -> Result<Vec<u8>> {
 /// newest `tr.cfg.log.keep_checkpoints`, and the one at the regularizer's fork point
 /// ([`crate::fork`]) when present. Returns its folder.
 pub fn save(tr: &Trainer, run: &Path) -> Result<PathBuf> {
+    // Never a checkpoint of a diverged state: the last good one stays `latest`.
+    if let Some(what) = crate::finite::locate(tr) {
+        return Err(TrainError::NonFinite {
+            iteration: tr.iteration,
+            what: format!("{what} (checkpoint not written)"),
+        });
+    }
     let root = run.join("checkpoints");
     create_dir_all(&root)?;
+    remove_partial(&root);
     let name = format!("iter_{:07}", tr.iteration);
     let tmp = root.join(format!(".{name}.tmp"));
-    if tmp.exists() {
-        std::fs::remove_dir_all(&tmp).map_err(|e| TrainError::io(&tmp, e))?;
-    }
     create_dir_all(&tmp)?;
     crate::ply::write(&tmp.join(PLY_NAME), &tr.state.model)?;
-    atomic_write(&tmp.join(STATE_NAME), &state_bytes(tr)?)?;
-    atomic_write(&tmp.join(CONFIG_NAME), tr.cfg.to_toml().as_bytes())?;
+    let state = state_bytes(tr)?;
+    atomic_write(&tmp.join(STATE_NAME), &state)?;
+    let config = tr.cfg.to_toml();
+    atomic_write(&tmp.join(CONFIG_NAME), config.as_bytes())?;
+    crate::integrity::write(
+        &tmp,
+        (PLY_NAME, &tr.state.model),
+        &[(STATE_NAME, &state), (CONFIG_NAME, config.as_bytes())],
+    )?;
     let dst = root.join(&name);
     if dst.exists() {
         std::fs::remove_dir_all(&dst).map_err(|e| TrainError::io(&dst, e))?;
@@ -138,6 +154,30 @@ pub fn save(tr: &Trainer, run: &Path) -> Result<PathBuf> {
     let pinned = crate::fork::fork_point(&tr.cfg.reg).map(|i| format!("iter_{i:07}"));
     prune_old(&root, &name, pinned.as_deref(), tr.cfg.log.keep_checkpoints);
     Ok(dst)
+}
+
+/// Removes what an interrupted save left behind: hidden `.iter_*.tmp` folders and
+/// `.latest.tmp-PID` files (one trainer writes a run at a time). Failures only log.
+fn remove_partial(root: &Path) {
+    let Ok(rd) = std::fs::read_dir(root) else {
+        return;
+    };
+    for e in rd.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if !(name.starts_with('.') && name.contains(".tmp")) {
+            continue;
+        }
+        let p = e.path();
+        let r = if p.is_dir() {
+            std::fs::remove_dir_all(&p)
+        } else {
+            std::fs::remove_file(&p)
+        };
+        match r {
+            Ok(()) => tracing::info!("removed {} (left by an interrupted save)", p.display()),
+            Err(err) => tracing::warn!("could not remove {}: {err}", p.display()),
+        }
+    }
 }
 
 /// Removes all but the newest `keep` checkpoints (never `current` or `pinned`); failures
@@ -339,11 +379,24 @@ impl LoadedModel {
 
 /// The model, field, objects and iteration of a checkpoint (for render/eval/export).
 pub fn load_model(dir: &Path) -> Result<LoadedModel> {
+    let verified = crate::integrity::verify(dir)?;
     let cfg = read_config(dir)?;
     let mut model = crate::ply::read(&dir.join(PLY_NAME))?;
     let path = dir.join(STATE_NAME);
     let bytes = crate::io::read(&path)?;
     let sf = parse_state(&bytes, &path)?;
+    if !verified && sf.meta::<String>("format")? == FORMAT {
+        let missing = crate::integrity::CHECKSUMS_NAME;
+        return Err(sf.err(format!(
+            "its folder lacks {missing}: an incomplete or damaged checkpoint"
+        )));
+    }
+    if !verified {
+        tracing::warn!(
+            "{} predates checkpoint checksums: loaded unverified",
+            dir.display()
+        );
+    }
     model.sh_degree = sf.meta("sh_degree")?;
     if model.sh_degree > 3 {
         return Err(sf.err("sh_degree > 3"));
@@ -403,7 +456,7 @@ fn parse_state<'a>(bytes: &'a [u8], path: &Path) -> Result<StateFile<'a>> {
         path: path.to_path_buf(),
     };
     let format: String = sf.meta("format")?;
-    if format != FORMAT {
+    if format != FORMAT && format != FORMAT_UNVERIFIED {
         return Err(sf.err(format!("format `{format}`, expected `{FORMAT}`")));
     }
     Ok(sf)

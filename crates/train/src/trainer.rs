@@ -214,13 +214,28 @@ impl Trainer {
         let (loss, psnr, extra_loss) =
             self.render_and_loss(fi, it, active, topk, &mut hook, &mut tm)?;
         if !loss.total.is_finite() {
+            let culprit = crate::finite::locate(self)
+                .map_or("every parameter is finite".into(), |c| {
+                    format!("first non-finite: {c}")
+                });
             return Err(TrainError::NonFinite {
                 iteration: it,
-                what: "loss".into(),
+                what: format!("the loss ({culprit})"),
             });
         }
         let objects_loss = self.backward(fi, active, &mut tm)?;
-        let densify = self.optimize_and_densify(it, fi, active, &mut tm);
+        let (densify, finite) = self.optimize_and_densify(it, fi, active, &mut tm);
+        let culprit = if finite {
+            crate::finite::locate_objects(self)
+        } else {
+            crate::finite::locate(self)
+        };
+        if let Some(what) = culprit {
+            return Err(TrainError::NonFinite {
+                iteration: it,
+                what,
+            });
+        }
         self.iteration = it;
         self.timings.add(&tm);
         Ok(StepStats {
@@ -426,13 +441,14 @@ impl Trainer {
     /// Adam on the field and Gaussians, then density control (3DGS `train.py` order). On
     /// iterations that densify, 3DGS's new tensors have no `.grad`, so the Gaussian step is
     /// skipped; after an opacity reset the opacity step is skipped. The field always steps.
+    /// Also returns whether every value the optimizer wrote is finite.
     fn optimize_and_densify(
         &mut self,
         it: u32,
         frame: usize,
         active: bool,
         tm: &mut StepTimings,
-    ) -> Option<DensifyReport> {
+    ) -> (Option<DensifyReport>, bool) {
         let t0 = std::time::Instant::now();
         let c = &self.cfg;
         let hp = AdamHyper {
@@ -440,9 +456,11 @@ impl Trainer {
             beta2: c.lr.adam_beta2,
             eps: c.lr.adam_eps,
         };
+        let mut finite = true;
         if active {
             let lr = expon_lr(c.lr.field_init, c.lr.field_final, c.lr.field_max_steps, it);
-            self.field_adam
+            finite &= self
+                .field_adam
                 .step(&mut self.field.mlp.params, &self.ws.field_grad, hp, lr);
         }
         let d = c.densify.clone();
@@ -452,7 +470,7 @@ impl Trainer {
         let reset_now =
             in_densify && (it.is_multiple_of(d.opacity_reset_interval) || (white && it == d.from));
         if !densify_now {
-            self.adam_gaussians(it, hp, !reset_now);
+            finite &= self.adam_gaussians(it, hp, !reset_now);
         }
         if let Some(node) = self.objects.as_mut() {
             node.step(hp);
@@ -489,10 +507,11 @@ impl Trainer {
             }
         }
         tm.record(Phase::Densify, t0);
-        report
+        (report, finite)
     }
 
-    fn adam_gaussians(&mut self, it: u32, hp: AdamHyper, step_opacity: bool) {
+    /// Adam on the five Gaussian groups; whether every value written is finite.
+    fn adam_gaussians(&mut self, it: u32, hp: AdamHyper, step_opacity: bool) -> bool {
         let c = &self.cfg.lr;
         let s = &mut self.state;
         let g = &self.ws;
@@ -503,11 +522,11 @@ impl Trainer {
             it,
         );
         let [a_means, a_quats, a_scales, a_opacity, a_sh] = &mut s.adam;
-        a_means.step(&mut s.model.means, &g.canon.means, hp, lr_means);
-        a_quats.step(&mut s.model.quats, &g.canon.quats, hp, c.rotation);
-        a_scales.step(&mut s.model.log_scales, &g.canon.log_scales, hp, c.scaling);
+        let mut ok = a_means.step(&mut s.model.means, &g.canon.means, hp, lr_means);
+        ok &= a_quats.step(&mut s.model.quats, &g.canon.quats, hp, c.rotation);
+        ok &= a_scales.step(&mut s.model.log_scales, &g.canon.log_scales, hp, c.scaling);
         if step_opacity {
-            a_opacity.step(
+            ok &= a_opacity.step(
                 &mut s.model.opacity_logits,
                 &g.grads.opacity_logits,
                 hp,
@@ -515,13 +534,13 @@ impl Trainer {
             );
         }
         let (dc, rest) = (c.sh_dc, c.sh_rest);
-        a_sh.step_rows(
+        ok & a_sh.step_rows(
             &mut s.model.sh,
             &g.grads.colors,
             hp,
             SH_COEFFS * 3,
             move |k| if k < 3 { dc } else { rest },
-        );
+        )
     }
 }
 

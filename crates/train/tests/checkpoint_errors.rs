@@ -11,6 +11,19 @@ fn saved_run() -> (tempfile::TempDir, std::path::PathBuf) {
     (run, dir)
 }
 
+/// Rewrites `checksums.json` to match the files as they are now, as if the damage below
+/// had been written that way: it then reaches the loader's own checks.
+fn unverified(dir: &std::path::Path) {
+    let p = dir.join(train::integrity::CHECKSUMS_NAME);
+    let mut v: serde_json::Value = serde_json::from_slice(&std::fs::read(&p).unwrap()).unwrap();
+    let files = v["files"].as_object_mut().unwrap();
+    for (name, crc) in files.iter_mut() {
+        *crc = train::integrity::crc_hex(&std::fs::read(dir.join(name)).unwrap()).into();
+    }
+    v["tensors"] = serde_json::json!({});
+    std::fs::write(&p, v.to_string()).unwrap();
+}
+
 /// The message of loading the trainer from a checkpoint that must fail.
 fn load_error(dir: &std::path::Path) -> String {
     checkpoint::load_trainer(dir, common::dataset())
@@ -32,6 +45,12 @@ fn fresh_checkpoint_roundtrips() {
 fn garbage_state_file_is_a_clear_error() {
     let (_run, dir) = saved_run();
     std::fs::write(dir.join(checkpoint::STATE_NAME), b"not safetensors").unwrap();
+    let e = load_error(&dir);
+    assert!(
+        e.contains("state.safetensors") && e.contains("no longer parses"),
+        "{e}"
+    );
+    unverified(&dir);
     let e = load_error(&dir);
     assert!(
         e.contains("state.safetensors") && e.contains("not a readable safetensors"),
@@ -59,6 +78,12 @@ fn nan_weights_are_rejected() {
     std::fs::write(&p, bytes).unwrap();
     let e = load_error(&dir);
     assert!(
+        e.contains("field.params") && e.contains("fails its checksum"),
+        "{e}"
+    );
+    unverified(&dir);
+    let e = load_error(&dir);
+    assert!(
         e.contains("field.params") && e.contains("non-finite"),
         "{e}"
     );
@@ -70,6 +95,7 @@ fn missing_and_truncated_files_are_clear_errors() {
     let ply = dir.join(checkpoint::PLY_NAME);
     let b = std::fs::read(&ply).unwrap();
     std::fs::write(&ply, &b[..b.len() / 2]).unwrap();
+    unverified(&dir);
     let e = checkpoint::load_model(&dir).err().unwrap().to_string();
     assert!(
         e.contains("point_cloud.ply") && e.contains("truncated"),
@@ -131,8 +157,104 @@ fn hook_rows_roundtrip_and_missing_rows_are_named() {
     let views: Vec<(String, safetensors::tensor::TensorView)> = st.tensors();
     std::fs::write(&p, safetensors::serialize(views, Some(meta)).unwrap()).unwrap();
     let e = load_error(&dir);
+    assert!(e.contains("outside the tensors"), "{e}");
+    unverified(&dir);
+    let e = load_error(&dir);
     assert!(
         e.contains("aux.reg.gone") && e.contains("state.safetensors"),
         "{e}"
     );
+}
+
+/// Flips one bit at byte `at` of `path`.
+fn flip(path: &std::path::Path, at: usize) {
+    let mut b = std::fs::read(path).unwrap();
+    b[at] ^= 0x04;
+    std::fs::write(path, b).unwrap();
+}
+
+/// The byte range of tensor `name`'s data in a safetensors file.
+fn tensor_range(bytes: &[u8], name: &str) -> std::ops::Range<usize> {
+    let hlen = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + hlen]).unwrap();
+    let offs = &header[name]["data_offsets"];
+    let (a, b) = (offs[0].as_u64().unwrap(), offs[1].as_u64().unwrap());
+    8 + hlen + a as usize..8 + hlen + b as usize
+}
+
+/// A flipped bit inside an Adam moment leaves a finite number that nothing else would
+/// notice: the checksum refuses it and names the tensor, for resume and for eval/render.
+#[test]
+fn a_flipped_bit_in_any_tensor_is_refused_with_file_and_tensor_named() {
+    let (_run, dir) = saved_run();
+    let p = dir.join(checkpoint::STATE_NAME);
+    let bytes = std::fs::read(&p).unwrap();
+    for name in ["adam.means.m", "stats.denom", "rng.seed", "field.params"] {
+        let r = tensor_range(&bytes, name);
+        std::fs::write(&p, &bytes).unwrap();
+        flip(&p, r.start + (r.end - r.start) / 2);
+        let e = load_error(&dir);
+        assert!(
+            e.contains("state.safetensors")
+                && e.contains(&format!("tensor `{name}` fails its checksum")),
+            "{name}: {e}"
+        );
+        let e = checkpoint::load_model(&dir)
+            .err()
+            .expect("eval refuses too")
+            .to_string();
+        assert!(e.contains(name), "{e}");
+    }
+    std::fs::write(&p, &bytes).unwrap();
+    assert!(checkpoint::load_trainer(&dir, common::dataset()).is_ok());
+
+    // The PLY: the last vertex's last float is `rot_3` (3DGS property order).
+    let ply = dir.join(checkpoint::PLY_NAME);
+    let len = std::fs::metadata(&ply).unwrap().len() as usize;
+    flip(&ply, len - 2);
+    let e = load_error(&dir);
+    assert!(
+        e.contains("point_cloud.ply") && e.contains("tensor `quats` fails its checksum"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_changed_config_or_checksum_file_is_refused() {
+    let (_run, dir) = saved_run();
+    let cfg = dir.join(checkpoint::CONFIG_NAME);
+    let text = std::fs::read_to_string(&cfg).unwrap();
+    std::fs::write(&cfg, text.replacen("iterations = 50", "iterations = 51", 1)).unwrap();
+    let e = load_error(&dir);
+    assert!(
+        e.contains("config.toml") && e.contains("fails its checksum"),
+        "{e}"
+    );
+    std::fs::write(&cfg, &text).unwrap();
+    let sums = dir.join(train::integrity::CHECKSUMS_NAME);
+    std::fs::write(&sums, "{not json").unwrap();
+    let e = load_error(&dir);
+    assert!(
+        e.contains("checksums.json") && e.contains("not readable"),
+        "{e}"
+    );
+}
+
+/// A folder without `checksums.json` is an incomplete save, unless its state says it was
+/// written before checksums existed (format `semdynreg-train-1`): that one still loads.
+#[test]
+fn missing_checksums_refuse_new_checkpoints_and_admit_old_ones() {
+    let (_run, dir) = saved_run();
+    std::fs::remove_file(dir.join(train::integrity::CHECKSUMS_NAME)).unwrap();
+    let e = load_error(&dir);
+    assert!(e.contains("lacks checksums.json") && e.contains("incomplete"), "{e}");
+    let p = dir.join(checkpoint::STATE_NAME);
+    let bytes = std::fs::read(&p).unwrap();
+    let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).unwrap();
+    let mut meta = meta.metadata().clone().unwrap();
+    assert_eq!(meta["format"], "semdynreg-train-2");
+    meta.insert("format".into(), "semdynreg-train-1".into());
+    let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+    std::fs::write(&p, safetensors::serialize(st.tensors(), Some(meta)).unwrap()).unwrap();
+    assert!(checkpoint::load_trainer(&dir, common::dataset()).is_ok());
 }

@@ -109,8 +109,11 @@ fn fresh(a: &Args) -> Result<Trainer> {
     let dataset = info
         .dataset()
         .with_context(|| format!("loading {}", info.scene.display()))?;
-    info.save(&a.out)?;
     let trainer = Trainer::new(cfg, dataset, a.seed)?;
+    // A checkpoint of the initial state first, then `run.json`: from the moment the folder
+    // counts as a run (`refuse_existing`), it can be resumed, however early it is killed.
+    checkpoint::save(&trainer, &a.out)?;
+    info.save(&a.out)?;
     tracing::info!(
         gaussians = trainer.state.len(),
         extent = trainer.extent,
@@ -132,6 +135,9 @@ fn resumed(a: &Args) -> Result<Trainer> {
     let dir = checkpoint::latest(&a.out)?;
     let trainer = checkpoint::load_trainer(&dir, dataset)
         .with_context(|| format!("resuming from {}", dir.display()))?;
+    // Lines logged after that checkpoint by the stopped segment are logged again.
+    let log = a.out.join("metrics.jsonl");
+    copy_log_until(&log, &log, trainer.iteration)?;
     tracing::info!(
         iteration = trainer.iteration,
         "resumed from {}",
@@ -241,13 +247,17 @@ pub fn run(a: Args) -> Result<()> {
     let first = tr.iteration;
     // Training time over all segments of a resumed run (checkpoints carry it).
     let before = tr.train_seconds;
+    // Resaving the iteration `latest` already names would replace that folder.
+    let mut last_saved = checkpoint::latest(&a.out).ok().map(|_| tr.iteration);
     let mut hook = if tr.cfg.reg.enabled {
         Some(SemanticHook::load(tr.cfg.reg.clone(), &tr.dataset)?)
     } else {
         None
     };
     while tr.iteration < tr.cfg.iterations {
-        let st = tr.step_with(hook.as_mut().map(|h| h as &mut dyn DeformHook))?;
+        let st = tr
+            .step_with(hook.as_mut().map(|h| h as &mut dyn DeformHook))
+            .with_context(|| stopped_note(&a.out))?;
         let it = st.iteration;
         pb.set_position(it as u64);
         pb.set_message(format!(
@@ -286,6 +296,7 @@ pub fn run(a: Args) -> Result<()> {
             || interrupted
         {
             let dir = checkpoint::save(&tr, &a.out)?;
+            last_saved = Some(it);
             tracing::info!("checkpoint {}", dir.display());
         }
         if interrupted {
@@ -297,9 +308,22 @@ pub fn run(a: Args) -> Result<()> {
     }
     pb.finish();
     tr.train_seconds = before + start.elapsed().as_secs_f64();
-    checkpoint::save(&tr, &a.out)?;
+    if last_saved != Some(tr.iteration) {
+        checkpoint::save(&tr, &a.out)?;
+    }
     write_timings(&tr, &a.out, start.elapsed().as_secs_f64(), first)?;
     Ok(())
+}
+
+/// What a failed step leaves: the last checkpoint (never a diverged one).
+fn stopped_note(run: &Path) -> String {
+    match checkpoint::latest(run) {
+        Ok(dir) => format!(
+            "training stopped; the last good checkpoint is {} (continue from it with --resume)",
+            dir.display()
+        ),
+        Err(_) => "training stopped before its first checkpoint".into(),
+    }
 }
 
 /// `RUN/timings.json`: wall time and the per-phase breakdown (ms per iteration) of this

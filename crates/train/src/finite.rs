@@ -1,0 +1,95 @@
+//! Divergence (issue 19, item 3): a loss or parameter that turns NaN/Inf stops the run with
+//! the iteration and the parameter group named, before anything non-finite reaches a
+//! checkpoint. The optimizer reports for free whether every value it wrote is finite
+//! ([`crate::adam::Adam::step_rows`]); [`locate`] then finds where (it scans the state, so
+//! it runs only when something is already wrong, and before each checkpoint is written).
+
+use crate::model::ROWS;
+use crate::trainer::Trainer;
+
+const GROUPS: [&str; 5] = ["means", "quats", "log_scales", "opacity_logits", "sh"];
+
+/// Index of the first non-finite value of `v`. Chunks are tested with a branch-free
+/// reduction (vectorized) and only a failing chunk is searched.
+pub fn first_nonfinite(v: &[f32]) -> Option<usize> {
+    const CHUNK: usize = 1024;
+    v.chunks(CHUNK).enumerate().find_map(|(c, chunk)| {
+        let bad = chunk.iter().fold(false, |acc, x| acc | !x.is_finite());
+        bad.then(|| c * CHUNK + chunk.iter().position(|x| !x.is_finite()).expect("found"))
+    })
+}
+
+/// The first non-finite value in what training updates, named (group, and row when the
+/// group has one per Gaussian); `None` when everything is finite.
+pub fn locate(tr: &Trainer) -> Option<String> {
+    let st = &tr.state;
+    let m = &st.model;
+    let n = st.len();
+    let params = [&m.means, &m.quats, &m.log_scales, &m.opacity_logits, &m.sh];
+    for ((g, v), r) in GROUPS.iter().zip(params).zip(ROWS) {
+        if let Some(i) = first_nonfinite(v) {
+            return Some(format!(
+                "Gaussian parameter `{g}` (Gaussian {} of {n})",
+                i / r
+            ));
+        }
+    }
+    if let Some(i) = first_nonfinite(&tr.field.mlp.params) {
+        return Some(format!("deformation-field weight {i}"));
+    }
+    for ((g, a), r) in GROUPS.iter().zip(&st.adam).zip(ROWS) {
+        for (which, v) in [("first", &a.m), ("second", &a.v)] {
+            if let Some(i) = first_nonfinite(v) {
+                return Some(format!(
+                    "Adam {which} moment of `{g}` (Gaussian {} of {n})",
+                    i / r
+                ));
+            }
+        }
+    }
+    for (which, v) in [("first", &tr.field_adam.m), ("second", &tr.field_adam.v)] {
+        if let Some(i) = first_nonfinite(v) {
+            return Some(format!(
+                "Adam {which} moment of deformation-field weight {i}"
+            ));
+        }
+    }
+    locate_objects(tr)
+}
+
+/// A non-finite knot of a rigid object's trajectory (a few hundred floats: cheap enough
+/// to test every iteration).
+pub fn locate_objects(tr: &Trainer) -> Option<String> {
+    let node = tr.objects.as_ref()?;
+    node.objects.iter().find_map(|o| {
+        let t = &o.trajectory;
+        let bad = |k: usize| {
+            t.translations[k]
+                .iter()
+                .chain(&t.rotations[k])
+                .any(|x| !x.is_finite())
+        };
+        (0..t.translations.len()).find(|&k| bad(k)).map(|k| {
+            format!(
+                "trajectory of object `{}` (knot {k}, t = {})",
+                o.name, t.times[k]
+            )
+        })
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn first_nonfinite_finds_nan_and_inf_in_any_chunk() {
+        let mut v = vec![1.0f32; 5000];
+        assert_eq!(first_nonfinite(&v), None);
+        v[4099] = f32::INFINITY;
+        assert_eq!(first_nonfinite(&v), Some(4099));
+        v[3] = f32::NAN;
+        assert_eq!(first_nonfinite(&v), Some(3));
+        assert_eq!(first_nonfinite(&[]), None);
+    }
+}

@@ -135,16 +135,11 @@ pub fn save(tr: &Trainer, run: &Path) -> Result<PathBuf> {
     let name = format!("iter_{:07}", tr.iteration);
     let tmp = root.join(format!(".{name}.tmp"));
     create_dir_all(&tmp)?;
-    crate::ply::write(&tmp.join(PLY_NAME), &tr.state.model)?;
-    let state = state_bytes(tr)?;
-    atomic_write(&tmp.join(STATE_NAME), &state)?;
-    let config = tr.cfg.to_toml();
-    atomic_write(&tmp.join(CONFIG_NAME), config.as_bytes())?;
-    crate::integrity::write(
-        &tmp,
-        (PLY_NAME, &tr.state.model),
-        &[(STATE_NAME, &state), (CONFIG_NAME, config.as_bytes())],
-    )?;
+    if let Err(e) = write_files(tr, &tmp) {
+        // A full disk or a read-only folder: leave nothing half-written behind.
+        let _ = std::fs::remove_dir_all(&tmp);
+        return Err(e);
+    }
     let dst = root.join(&name);
     if dst.exists() {
         std::fs::remove_dir_all(&dst).map_err(|e| TrainError::io(&dst, e))?;
@@ -154,6 +149,20 @@ pub fn save(tr: &Trainer, run: &Path) -> Result<PathBuf> {
     let pinned = crate::fork::fork_point(&tr.cfg.reg).map(|i| format!("iter_{i:07}"));
     prune_old(&root, &name, pinned.as_deref(), tr.cfg.log.keep_checkpoints);
     Ok(dst)
+}
+
+/// The files of a checkpoint of `tr`, written into the folder `dir`; `checksums.json` last.
+fn write_files(tr: &Trainer, dir: &Path) -> Result<()> {
+    crate::ply::write(&dir.join(PLY_NAME), &tr.state.model)?;
+    let state = state_bytes(tr)?;
+    atomic_write(&dir.join(STATE_NAME), &state)?;
+    let config = tr.cfg.to_toml();
+    atomic_write(&dir.join(CONFIG_NAME), config.as_bytes())?;
+    crate::integrity::write(
+        dir,
+        (PLY_NAME, &tr.state.model),
+        &[(STATE_NAME, &state), (CONFIG_NAME, config.as_bytes())],
+    )
 }
 
 /// Removes what an interrupted save left behind: hidden `.iter_*.tmp` folders and

@@ -491,6 +491,17 @@ mod tests {
         assert!(e.to_string().contains("widht"), "{e}");
     }
 
+    /// Found by the disk-full test: `--iters 5` rescaled `objects.start_iter` to 0.
+    #[test]
+    fn every_short_schedule_rescales_to_a_valid_config() {
+        for n in 1..=64 {
+            let c = TrainConfig::default()
+                .rescaled(n)
+                .unwrap_or_else(|e| panic!("{n}: {e}"));
+            c.validate().unwrap_or_else(|e| panic!("--iters {n}: {e}"));
+        }
+    }
+
     #[test]
     fn rescale_keeps_proportions() {
         let c = TrainConfig::default().rescaled(400).unwrap();

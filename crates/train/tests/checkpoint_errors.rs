@@ -247,7 +247,10 @@ fn missing_checksums_refuse_new_checkpoints_and_admit_old_ones() {
     let (_run, dir) = saved_run();
     std::fs::remove_file(dir.join(train::integrity::CHECKSUMS_NAME)).unwrap();
     let e = load_error(&dir);
-    assert!(e.contains("lacks checksums.json") && e.contains("incomplete"), "{e}");
+    assert!(
+        e.contains("lacks checksums.json") && e.contains("incomplete"),
+        "{e}"
+    );
     let p = dir.join(checkpoint::STATE_NAME);
     let bytes = std::fs::read(&p).unwrap();
     let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).unwrap();
@@ -255,6 +258,10 @@ fn missing_checksums_refuse_new_checkpoints_and_admit_old_ones() {
     assert_eq!(meta["format"], "semdynreg-train-2");
     meta.insert("format".into(), "semdynreg-train-1".into());
     let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
-    std::fs::write(&p, safetensors::serialize(st.tensors(), Some(meta)).unwrap()).unwrap();
+    std::fs::write(
+        &p,
+        safetensors::serialize(st.tensors(), Some(meta)).unwrap(),
+    )
+    .unwrap();
     assert!(checkpoint::load_trainer(&dir, common::dataset()).is_ok());
 }

@@ -124,7 +124,8 @@ impl ObjectsConfig {
     pub fn rescaled(&self, from: u32, to: u32) -> Self {
         let at = |v: u32| (v as f64 * to as f64 / from as f64).round() as u32;
         Self {
-            start_iter: at(self.start_iter),
+            // ≥ 1: a very short schedule (`--iters 5`) still starts the objects.
+            start_iter: at(self.start_iter).max(1),
             rescale_at: self.rescale_at.iter().map(|&v| at(v)).collect(),
             ..self.clone()
         }

@@ -59,7 +59,8 @@ impl CropPolicy {
              clamped to the image, grown to ≥ {} px per side; objects with < {} mask pixels \
              are not scored",
             self.min_pad_px,
-            self.pad_fraction * 100.0,
+            // Rounded: 0.15 × 100 in f32 prints as 15.000001.
+            (self.pad_fraction as f64 * 1e5).round() / 1e3,
             self.min_side,
             self.min_pixels
         )

@@ -108,7 +108,7 @@ fn backward_impl(
             if pos as u32 >= rl {
                 continue;
             }
-            let dy = sp.my - (tin.y0 as f32 + r as f32 + 0.5);
+            let dy = sp.row_dy(tin.y0, r);
             if !sp.reaches_row(dy, tin.x0 as f32) {
                 continue;
             }

@@ -3,12 +3,21 @@
 //! to the tile grid), and each list is in increasing depth (ties: lower index first, as
 //! gsplat's sort of `tile | depth` keys over index-ordered intersections).
 //!
+//! With [`Cull::Exact`] (issue 17) a Gaussian keeps, in each tile row of that box, only the
+//! tiles its opacity-aware ellipse `σ ≤ ln(255·o)` can reach, in the kernels' own row tests
+//! ([`Splat::rows`], [`Splat::chord`]): the per-row analogue of the exact ellipse–tile tests
+//! of FlashGS, StopThePop (as ported in Brush) and Speedy-Splat's AccuTile, and of gsplat's
+//! opacity-aware extent (PR #597). Each Gaussian's kept tiles are one span `[x0, x1)` per
+//! tile row (`spans`); a dropped tile is one in which the kernels would evaluate no row, so
+//! dropping it changes no image and no gradient (tests/cull_equivalence.rs).
+//!
 //! Instead of sorting all (tile, depth) keys, the visible Gaussians are sorted once by depth
 //! and then distributed into the tiles by a counting sort, which keeps each list in depth
 //! order: O(N log N + intersections).
 
+use crate::forward::{Splat, TS};
 use crate::project::Projected;
-use crate::TILE_SIZE;
+use crate::{Cull, TILE_SIZE};
 use rayon::prelude::*;
 
 /// Per-tile, depth-sorted Gaussian lists; buffers are reused across builds.
@@ -31,9 +40,29 @@ pub(crate) struct Bins {
     /// tile) in the backward instead of a dependent chain through `order` and `rects`.
     slot_geom: Vec<SlotGeom>,
     keys: Vec<u64>,
-    /// Tile rectangle `[x0, x1, y0, y1)` of each Gaussian (by global index).
+    /// Tile rectangle `[x0, x1, y0, y1)` of each Gaussian (by global index): the bounding
+    /// box of its kept tiles (with [`Cull::Box3Sigma`], its whole 3.33σ box).
     pub rects: Vec<[u32; 4]>,
+    /// Kept tiles `[x0, x1)` of each tile row of each Gaussian's 3.33σ box, Gaussian after
+    /// Gaussian; `span_at[g]` says where Gaussian `g`'s rows start.
+    spans: Vec<[u32; 2]>,
+    span_at: Vec<SpanAt>,
     cursor: Vec<usize>,
+}
+
+/// Where a Gaussian's tile-row spans start in `Bins::spans`, and the tile row of the first.
+#[derive(Clone, Copy, Debug, Default)]
+struct SpanAt {
+    start: usize,
+    y0: u32,
+}
+
+impl SpanAt {
+    /// Span of tile row `y` (inside the Gaussian's rectangle).
+    #[inline]
+    fn span(self, spans: &[[u32; 2]], y: usize) -> [u32; 2] {
+        spans[self.start + y - self.y0 as usize]
+    }
 }
 
 /// A rank's first slot and the corner and width of its tile rectangle.
@@ -63,9 +92,72 @@ fn tile_rect(p: &Projected, tiles_x: usize, tiles_y: usize) -> [u32; 4] {
     ]
 }
 
+/// Tiles `[x0, x1)` of tile row `ty`, within `[rx0, rx1)`, in which some pixel row passes
+/// the kernels' row tests for `sp` (empty: `x0 == x1`). The hull of the rows' chords
+/// `[lo, hi]` is taken over the band; the kernel keeps tile `tx` for a row iff
+/// `hi ≥ 16·tx + 0.5` and `lo ≤ 16·tx + 15.5` (exact f32 compares), so `tx` ranges over
+/// at most `floor(lo/16) ..= floor(hi/16)` (division by 16 is exact): every tile with a
+/// passing row is kept, a few without one may be.
+fn row_span(sp: &Splat, ty: u32, rx0: u32, rx1: u32) -> [u32; 2] {
+    let y0 = ty * TILE_SIZE;
+    let (r0, r1) = sp.rows(y0);
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for r in r0..r1 {
+        let (a, b) = sp.chord(sp.row_dy(y0, r));
+        lo = lo.min(a);
+        hi = hi.max(b);
+    }
+    // `min`/`max` skip NaN chord ends (which fail the kernels' compares too), so `lo`, `hi`
+    // are never NaN; `lo > hi` when no row has a chord.
+    if lo > hi {
+        return [rx0, rx0];
+    }
+    let ts = TS as f32;
+    let clamp = |v: f32| (v.max(rx0 as f32).min(rx1 as f32)) as u32;
+    let (x0, x1) = (clamp((lo / ts).floor()), clamp((hi / ts).floor() + 1.0));
+    if x0 < x1 {
+        [x0, x1]
+    } else {
+        [rx0, rx0]
+    }
+}
+
+/// Fills `spans` (one per tile row of `rect`, the 3.33σ box) and returns the bounding
+/// rectangle of the kept tiles (all zero when none).
+fn cull_spans(p: &Projected, rect: [u32; 4], cull: Cull, spans: &mut [[u32; 2]]) -> [u32; 4] {
+    let [x0, x1, y0, y1] = rect;
+    if cull == Cull::Box3Sigma {
+        spans.fill([x0, x1]);
+        return rect;
+    }
+    let sp = Splat::new(p.mean2d, p.conic, p.opacity, p.rgb);
+    let mut bound = [u32::MAX, 0, u32::MAX, 0];
+    for (ty, s) in (y0..y1).zip(spans.iter_mut()) {
+        *s = row_span(&sp, ty, x0, x1);
+        if s[0] < s[1] {
+            bound = [
+                bound[0].min(s[0]),
+                bound[1].max(s[1]),
+                bound[2].min(ty),
+                ty + 1,
+            ];
+        }
+    }
+    if bound[0] < bound[1] {
+        bound
+    } else {
+        [0; 4]
+    }
+}
+
 impl Bins {
     pub fn n_isects(&self) -> usize {
         self.ids.len()
+    }
+
+    /// Gradient slots: the area of each visible Gaussian's tile rectangle.
+    pub fn n_slots(&self) -> usize {
+        self.slot_start.last().copied().unwrap_or(0)
     }
 
     pub fn tile_list(&self, tile: usize) -> &[u32] {
@@ -80,7 +172,46 @@ impl Bins {
         g.start + (ty - g.y0 as usize) * g.width as usize + (tx - g.x0 as usize)
     }
 
-    pub fn build(&mut self, proj: &[Projected], width: u32, height: u32) {
+    /// Replaces each 3.33σ rectangle in `rects` by the bounding box of its kept tiles and
+    /// fills `spans` / `span_at` (parallel over chunks of Gaussians).
+    fn cull(&mut self, proj: &[Projected], cull: Cull) {
+        self.span_at.clear();
+        let mut total = 0;
+        for r in &self.rects {
+            self.span_at.push(SpanAt {
+                start: total,
+                y0: r[2],
+            });
+            total += (r[3] - r[2]) as usize;
+        }
+        self.spans.clear();
+        self.spans.resize(total, [0; 2]);
+        // Disjoint (Gaussians, spans) chunks for the parallel jobs.
+        const CHUNK: usize = 2048;
+        let starts: Vec<usize> = (0..proj.len().div_ceil(CHUNK))
+            .map(|c| self.span_at[c * CHUNK].start)
+            .chain([total])
+            .collect();
+        let mut jobs = Vec::with_capacity(starts.len());
+        let (mut spans, mut rects) = (&mut self.spans[..], &mut self.rects[..]);
+        for (c, w) in starts.windows(2).enumerate() {
+            let (s, s_rest) = std::mem::take(&mut spans).split_at_mut(w[1] - w[0]);
+            let n = rects.len().min(CHUNK);
+            let (r, r_rest) = std::mem::take(&mut rects).split_at_mut(n);
+            (spans, rects) = (s_rest, r_rest);
+            jobs.push((c * CHUNK, s, r));
+        }
+        jobs.into_par_iter().for_each(|(g0, spans, rects)| {
+            let mut off = 0;
+            for (j, rect) in rects.iter_mut().enumerate() {
+                let h = (rect[3] - rect[2]) as usize;
+                *rect = cull_spans(&proj[g0 + j], *rect, cull, &mut spans[off..off + h]);
+                off += h;
+            }
+        });
+    }
+
+    pub fn build(&mut self, proj: &[Projected], width: u32, height: u32, cull: Cull) {
         let ts = TILE_SIZE as usize;
         self.tiles_x = (width as usize).div_ceil(ts);
         self.tiles_y = (height as usize).div_ceil(ts);
@@ -89,6 +220,7 @@ impl Bins {
         self.rects.clear();
         self.rects
             .par_extend(proj.par_iter().map(|p| tile_rect(p, tx, ty)));
+        self.cull(proj, cull);
         self.keys.clear();
         let rects = &self.rects;
         self.keys.par_extend(
@@ -125,7 +257,12 @@ impl Bins {
         self.offsets.clear();
         self.offsets.resize(n_tiles + 1, 0);
         let bands = ty.min(4 * rayon::current_num_threads()).max(1);
-        count_bands(rects, tx, (0, ty), bands, &mut self.offsets[1..]);
+        let sp = Spans {
+            rects,
+            spans: &self.spans,
+            at: &self.span_at,
+        };
+        count_bands(&sp, tx, (0, ty), bands, &mut self.offsets[1..]);
         for t in 0..n_tiles {
             self.offsets[t + 1] += self.offsets[t];
         }
@@ -135,7 +272,7 @@ impl Bins {
         self.cursor.extend_from_slice(&self.offsets[..n_tiles]);
         fill_bands(
             &self.keys,
-            rects,
+            &sp,
             tx,
             (0, ty),
             bands,
@@ -146,28 +283,30 @@ impl Bins {
     }
 }
 
+/// What the band jobs read of each Gaussian: its rectangle and its rows' spans.
+struct Spans<'a> {
+    rects: &'a [[u32; 4]],
+    spans: &'a [[u32; 2]],
+    at: &'a [SpanAt],
+}
+
 /// Counts the intersections of each tile in tile rows `rows` into `counts` (one slot per
 /// tile of those rows), splitting the rows into `bands` parallel jobs.
-fn count_bands(
-    rects: &[[u32; 4]],
-    tx: usize,
-    rows: (usize, usize),
-    bands: usize,
-    counts: &mut [usize],
-) {
+fn count_bands(sp: &Spans, tx: usize, rows: (usize, usize), bands: usize, counts: &mut [usize]) {
     if bands > 1 && rows.1 - rows.0 > 1 {
         let mid = rows.0 + (rows.1 - rows.0) / 2;
         let (lo, hi) = counts.split_at_mut((mid - rows.0) * tx);
         rayon::join(
-            || count_bands(rects, tx, (rows.0, mid), bands / 2, lo),
-            || count_bands(rects, tx, (mid, rows.1), bands - bands / 2, hi),
+            || count_bands(sp, tx, (rows.0, mid), bands / 2, lo),
+            || count_bands(sp, tx, (mid, rows.1), bands - bands / 2, hi),
         );
         return;
     }
-    for &[x0, x1, y0, y1] in rects {
+    for (&[_, _, y0, y1], &at) in sp.rects.iter().zip(sp.at) {
         let (ya, yb) = ((y0 as usize).max(rows.0), (y1 as usize).min(rows.1));
         for y in ya..yb {
             let row = (y - rows.0) * tx;
+            let [x0, x1] = at.span(sp.spans, y);
             for x in x0..x1 {
                 counts[row + x as usize] += 1;
             }
@@ -181,7 +320,7 @@ fn count_bands(
 #[allow(clippy::too_many_arguments)]
 fn fill_bands(
     keys: &[u64],
-    rects: &[[u32; 4]],
+    sp: &Spans,
     tx: usize,
     rows: (usize, usize),
     bands: usize,
@@ -195,11 +334,11 @@ fn fill_bands(
         let split = chi.first().map_or(base + ids.len(), |&c| c);
         let (ilo, ihi) = ids.split_at_mut(split - base);
         rayon::join(
-            || fill_bands(keys, rects, tx, (rows.0, mid), bands / 2, clo, ilo, base),
+            || fill_bands(keys, sp, tx, (rows.0, mid), bands / 2, clo, ilo, base),
             || {
                 fill_bands(
                     keys,
-                    rects,
+                    sp,
                     tx,
                     (mid, rows.1),
                     bands - bands / 2,
@@ -213,15 +352,105 @@ fn fill_bands(
     }
     // Lists hold depth ranks: the kernels then read the rank-ordered splats forwards.
     for (rank, &key) in keys.iter().enumerate() {
-        let [x0, x1, y0, y1] = rects[key as u32 as usize];
+        let gid = key as u32 as usize;
+        let [_, _, y0, y1] = sp.rects[gid];
         let (ya, yb) = ((y0 as usize).max(rows.0), (y1 as usize).min(rows.1));
         for y in ya..yb {
             let row = (y - rows.0) * tx;
+            let [x0, x1] = sp.at[gid].span(sp.spans, y);
             for x in x0..x1 {
                 let c = &mut cursor[row + x as usize];
                 ids[*c - base] = rank as u32;
                 *c += 1;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fastexp;
+    use crate::forward::{ALPHA_MAX, ALPHA_MIN};
+    use rand::{Rng, SeedableRng};
+
+    /// A random projected Gaussian around a 6×6-tile grid: rotated, elongated up to 1:100,
+    /// opacity from just under 1/255 to 1, mean anywhere including off the grid.
+    fn random_projected(rng: &mut impl Rng) -> Projected {
+        let (s1, s2) = (rng.gen_range(0.3f32..40.0), rng.gen_range(0.3f32..40.0));
+        let th = rng.gen_range(0.0f32..std::f32::consts::PI);
+        let (c, s) = (th.cos(), th.sin());
+        let xx = c * c * s1 * s1 + s * s * s2 * s2 + 0.3;
+        let yy = s * s * s1 * s1 + c * c * s2 * s2 + 0.3;
+        let xy = c * s * (s1 * s1 - s2 * s2);
+        let det = xx * yy - xy * xy;
+        let o = if rng.gen_bool(0.3) {
+            rng.gen_range(0.97f32..1.5) / 255.0
+        } else {
+            rng.gen_range(0.004f32..1.0)
+        };
+        // Per-axis 3.33σ radii, as `project` (the box the exact culling starts from).
+        let r = |v: f32| (3.33 * v.sqrt()).ceil() as i32;
+        Projected {
+            mean2d: [
+                rng.gen_range(-40.0f32..136.0),
+                rng.gen_range(-40.0f32..136.0),
+            ],
+            depth: 1.0,
+            conic: [yy / det, -xy / det, xx / det],
+            radii: [r(xx), r(yy)],
+            opacity: o,
+            rgb: [1.0; 3],
+        }
+    }
+
+    /// Every tile of the 3.33σ box that `Cull::Exact` drops is one in which (1) no pixel row
+    /// passes the kernels' row tests and (2) no pixel reaches α ≥ 1/255 in the kernels' own
+    /// arithmetic (σ in f32, the polynomial exp). (1) is what makes images and gradients
+    /// bit-identical; (2) holds through the row tests' margins (without them it fails, as
+    /// `chord_cull_is_conservative` shows for the rows). The counts make sure the test
+    /// reaches the boundary: many dropped tiles, some within 10 % of the threshold.
+    #[test]
+    fn exact_cull_drops_only_tiles_the_kernels_skip() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let (tiles, ts) = (6usize, TS as f32);
+        let (mut dropped, mut near_miss, mut kept) = (0u64, 0u64, 0u64);
+        for _ in 0..20_000 {
+            let p = random_projected(&mut rng);
+            let rect = tile_rect(&p, tiles, tiles);
+            let h = (rect[3] - rect[2]) as usize;
+            let mut spans = vec![[0u32; 2]; h];
+            let bound = cull_spans(&p, rect, Cull::Exact, &mut spans);
+            let sp = Splat::new(p.mean2d, p.conic, p.opacity, p.rgb);
+            for ty in rect[2]..rect[3] {
+                let [sx0, sx1] = spans[(ty - rect[2]) as usize];
+                for tx in rect[0]..rect[1] {
+                    if sx0 <= tx && tx < sx1 {
+                        kept += 1;
+                        assert!(bound[0] <= tx && tx < bound[1] && bound[2] <= ty && ty < bound[3]);
+                        continue;
+                    }
+                    dropped += 1;
+                    let (x0, y0) = (tx as f32 * ts, ty * TILE_SIZE);
+                    let (r0, r1) = sp.rows(y0);
+                    for r in 0..TS {
+                        let dy = sp.row_dy(y0, r);
+                        let row_on = (r0..r1).contains(&r) && sp.reaches_row(dy, x0);
+                        assert!(!row_on, "tile ({tx}, {ty}) row {r}: {p:?}");
+                        for l in 0..TS {
+                            let dx = sp.mx - (x0 + l as f32 + 0.5);
+                            let sigma = 0.5 * (sp.a * dx * dx + sp.c * dy * dy) + sp.b * dx * dy;
+                            let alpha = (sp.o * fastexp::exp(-sigma)).min(ALPHA_MAX);
+                            assert!(!(sigma >= 0.0 && alpha >= ALPHA_MIN), "{p:?}");
+                            near_miss += (alpha >= 0.9 * ALPHA_MIN) as u64;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            dropped > 20_000 && near_miss > 100 && kept > 20_000,
+            "{dropped} {near_miss} {kept}"
+        );
     }
 }

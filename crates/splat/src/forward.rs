@@ -68,11 +68,27 @@ impl Splat {
     /// them the kernels would composite nothing, so the result is unchanged.
     #[inline(always)]
     pub fn reaches_row(&self, dy: f32, x0: f32) -> bool {
+        let (lo, hi) = self.chord(dy);
+        hi >= x0 + 0.5 && lo <= x0 + (TS as f32 - 0.5)
+    }
+
+    /// The row's chord `[centre − half, centre + half]` of [`Splat::reaches_row`], with its
+    /// margins. Binning (`bin.rs`, [`crate::Cull::Exact`]) calls this same function, so it
+    /// keeps exactly the tiles in which some row passes this test.
+    #[inline(always)]
+    pub fn chord(&self, dy: f32) -> (f32, f32) {
         let disc = self.thr2 * self.a - dy * dy * (self.a * self.c - self.b * self.b);
         let inv_a = 1.0 / self.a;
         let half = disc.max(0.0).sqrt() * inv_a * 1.001 + 0.01;
         let centre = self.mx + self.b * dy * inv_a;
-        centre + half >= x0 + 0.5 && centre - half <= x0 + (TS as f32 - 0.5)
+        (centre - half, centre + half)
+    }
+
+    /// `my − y` at the centre of row `r` of the tile starting at pixel row `y0`, in the
+    /// kernels' own f32 order of operations.
+    #[inline(always)]
+    pub fn row_dy(&self, y0: u32, r: usize) -> f32 {
+        self.my - (y0 as f32 + r as f32 + 0.5)
     }
 
     /// Rows `[r0, r1)` of the tile starting at pixel row `y0` that the Gaussian may reach.
@@ -98,6 +114,8 @@ pub(crate) struct TileCtx {
     pub rows: usize,
     pub k: usize,
     pub bg: [f32; 3],
+    /// Also count the pairs with `α ≥ 1/255` (diagnostic, portable kernel).
+    pub count_alpha: bool,
 }
 
 /// One tile's slices of the tile-major output buffers.
@@ -113,7 +131,11 @@ pub(crate) struct TileOut<'a> {
     pub topk_w: &'a mut [f32],
 }
 
-/// Renders one tile; returns the number of (pixel, Gaussian) pairs evaluated.
+/// (pixel, Gaussian) pairs a tile job evaluated, and of those the ones with `α ≥ 1/255` at
+/// an unfinished pixel (0 unless [`TileCtx::count_alpha`]).
+pub(crate) type PairCounts = (u64, u64);
+
+/// Renders one tile; returns its [`PairCounts`].
 /// `list` holds depth ranks indexing `splats`; `gids` maps a rank to its global index.
 pub(crate) fn render_tile(
     simd: Simd,
@@ -122,7 +144,16 @@ pub(crate) fn render_tile(
     splats: &[Splat],
     gids: &[u32],
     out: TileOut,
-) -> u64 {
+) -> PairCounts {
+    if ctx.count_alpha {
+        // Diagnostic path: same arithmetic (the levels are bit-identical), not vectorized
+        // for AVX, and the hot kernels below stay free of the counter.
+        return if ctx.k > 0 {
+            tile_impl::<true, true>(ctx, list, splats, gids, out)
+        } else {
+            tile_impl::<false, true>(ctx, list, splats, gids, out)
+        };
+    }
     #[cfg(target_arch = "x86_64")]
     match simd {
         // SAFETY: `simd_level` checked that the CPU supports these features.
@@ -145,9 +176,9 @@ pub(crate) fn render_tile(
     }
     let _ = simd;
     if ctx.k > 0 {
-        tile_impl::<true>(ctx, list, splats, gids, out)
+        tile_impl::<true, false>(ctx, list, splats, gids, out)
     } else {
-        tile_impl::<false>(ctx, list, splats, gids, out)
+        tile_impl::<false, false>(ctx, list, splats, gids, out)
     }
 }
 
@@ -159,8 +190,8 @@ unsafe fn tile_avx2<const TOPK: bool>(
     splats: &[Splat],
     gids: &[u32],
     out: TileOut,
-) -> u64 {
-    tile_impl::<TOPK>(ctx, list, splats, gids, out)
+) -> PairCounts {
+    tile_impl::<TOPK, false>(ctx, list, splats, gids, out)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -171,8 +202,8 @@ unsafe fn tile_avx512<const TOPK: bool>(
     splats: &[Splat],
     gids: &[u32],
     out: TileOut,
-) -> u64 {
-    tile_impl::<TOPK>(ctx, list, splats, gids, out)
+) -> PairCounts {
+    tile_impl::<TOPK, false>(ctx, list, splats, gids, out)
 }
 
 /// Per-pixel compositing state of a tile, row-major 16×16.
@@ -206,17 +237,17 @@ impl State {
 }
 
 #[inline(always)]
-fn tile_impl<const TOPK: bool>(
+fn tile_impl<const TOPK: bool, const COUNT: bool>(
     ctx: &TileCtx,
     list: &[u32],
     splats: &[Splat],
     gids: &[u32],
     out: TileOut,
-) -> u64 {
+) -> PairCounts {
     let mut s = State::new(ctx);
     let px: [f32; TS] = std::array::from_fn(|l| ctx.x0 as f32 + l as f32 + 0.5);
     let mut wrow = [0.0f32; TS];
-    let mut pairs = 0u64;
+    let (mut pairs, mut alpha_pairs) = (0u64, 0u64);
     for (pos, &rank) in list.iter().enumerate() {
         let sp = &splats[rank as usize];
         let (r0, r1) = sp.rows(ctx.y0);
@@ -224,7 +255,7 @@ fn tile_impl<const TOPK: bool>(
             if !s.live[r] {
                 continue;
             }
-            let dy = sp.my - (ctx.y0 as f32 + r as f32 + 0.5);
+            let dy = sp.row_dy(ctx.y0, r);
             if !sp.reaches_row(dy, ctx.x0 as f32) {
                 continue;
             }
@@ -241,6 +272,9 @@ fn tile_impl<const TOPK: bool>(
                 (&mut cg[span.clone()]).try_into().expect("16"),
                 (&mut cb[span.clone()]).try_into().expect("16"),
             ];
+            if COUNT {
+                alpha_pairs += count_alpha_row(sp, &px, dy, row.t);
+            }
             let live = composite_row(sp, &px, dy, pos as u32 + 1, row, cols, &mut wrow);
             s.live[r] = live;
             if TOPK {
@@ -260,7 +294,20 @@ fn tile_impl<const TOPK: bool>(
         }
     }
     finish(ctx, &s, out);
-    pairs
+    (pairs, alpha_pairs)
+}
+
+/// Pixels of one row where [`composite_row`] would find `σ ≥ 0`, `α ≥ 1/255` and the pixel
+/// unfinished (its `ok`), in its arithmetic.
+fn count_alpha_row(sp: &Splat, px: &[f32; TS], dy: f32, t: &[f32; TS]) -> u64 {
+    let mut n = 0;
+    for l in 0..TS {
+        let dx = sp.mx - px[l];
+        let sigma = 0.5 * (sp.a * dx * dx + sp.c * dy * dy) + sp.b * dx * dy;
+        let alpha = (sp.o * fastexp::exp(-sigma)).min(ALPHA_MAX);
+        n += ((sigma >= 0.0) & (alpha >= ALPHA_MIN) & (t[l] > 0.0)) as u64;
+    }
+    n
 }
 
 struct Row<'a> {

@@ -7,15 +7,19 @@
 //! tiles its opacity-aware ellipse `σ ≤ ln(255·o)` can reach, in the kernels' own row tests
 //! ([`Splat::rows`], [`Splat::chord`]): the per-row analogue of the exact ellipse–tile tests
 //! of FlashGS, StopThePop (as ported in Brush) and Speedy-Splat's AccuTile, and of gsplat's
-//! opacity-aware extent (PR #597). Each Gaussian's kept tiles are one span `[x0, x1)` per
-//! tile row (`spans`); a dropped tile is one in which the kernels would evaluate no row, so
-//! dropping it changes no image and no gradient (tests/cull_equivalence.rs).
+//! opacity-aware extent (PR #597). Binning computes each pixel row's chord once per
+//! Gaussian and from it, per tile, the 16-bit mask of rows the kernels evaluate
+//! ([`Splat::row_mask`], bit-exact: the same compares on the same f32 values); tiles whose
+//! mask is zero are dropped, the others carry their mask in the list (`masks`), so the
+//! kernels no longer test rows (a square root and a division per row and tile, in both
+//! passes). A dropped tile is one in which the kernels would evaluate no row, so dropping
+//! it changes no image and no gradient (tests/cull_equivalence.rs).
 //!
 //! Instead of sorting all (tile, depth) keys, the visible Gaussians are sorted once by depth
 //! and then distributed into the tiles by a counting sort, which keeps each list in depth
 //! order: O(N log N + intersections).
 
-use crate::forward::{Splat, TS};
+use crate::forward::{Splat, TileList, TS};
 use crate::project::Projected;
 use crate::{Cull, TILE_SIZE};
 use rayon::prelude::*;
@@ -29,6 +33,8 @@ pub(crate) struct Bins {
     pub offsets: Vec<usize>,
     /// Depth ranks (indices into `order`), tile after tile, increasing in each tile.
     pub ids: Vec<u32>,
+    /// With [`Cull::Exact`]: the [`Splat::row_mask`] of each entry of `ids` (else empty).
+    pub masks: Vec<u16>,
     /// Global index of the visible Gaussian of each depth rank (front to back).
     pub order: Vec<u32>,
     /// Depth rank of each Gaussian (`u32::MAX` when not visible).
@@ -46,15 +52,22 @@ pub(crate) struct Bins {
     /// Kept tiles `[x0, x1)` of each tile row of each Gaussian's 3.33σ box, Gaussian after
     /// Gaussian; `span_at[g]` says where Gaussian `g`'s rows start.
     spans: Vec<[u32; 2]>,
+    /// With [`Cull::Exact`]: the row mask of every tile of each Gaussian's 3.33σ box
+    /// (row-major; 0 = dropped), Gaussian after Gaussian.
+    box_masks: Vec<u16>,
     span_at: Vec<SpanAt>,
     cursor: Vec<usize>,
 }
 
-/// Where a Gaussian's tile-row spans start in `Bins::spans`, and the tile row of the first.
+/// Where a Gaussian's tile-row spans and box masks start, and its 3.33σ box's corner and
+/// width.
 #[derive(Clone, Copy, Debug, Default)]
 struct SpanAt {
     start: usize,
+    mask: usize,
+    x0: u32,
     y0: u32,
+    w: u32,
 }
 
 impl SpanAt {
@@ -62,6 +75,16 @@ impl SpanAt {
     #[inline]
     fn span(self, spans: &[[u32; 2]], y: usize) -> [u32; 2] {
         spans[self.start + y - self.y0 as usize]
+    }
+
+    /// Row mask of tile `(x, y)` of the box (`u16::MAX`, "keep", without masks).
+    #[inline]
+    fn mask(self, masks: &[u16], x: usize, y: usize) -> u16 {
+        if masks.is_empty() {
+            return u16::MAX;
+        }
+        let row = (y - self.y0 as usize) * self.w as usize;
+        masks[self.mask + row + x - self.x0 as usize]
     }
 }
 
@@ -92,48 +115,70 @@ fn tile_rect(p: &Projected, tiles_x: usize, tiles_y: usize) -> [u32; 4] {
     ]
 }
 
-/// Tiles `[x0, x1)` of tile row `ty`, within `[rx0, rx1)`, in which some pixel row passes
-/// the kernels' row tests for `sp` (empty: `x0 == x1`). The hull of the rows' chords
-/// `[lo, hi]` is taken over the band; the kernel keeps tile `tx` for a row iff
-/// `hi ≥ 16·tx + 0.5` and `lo ≤ 16·tx + 15.5` (exact f32 compares), so `tx` ranges over
-/// at most `floor(lo/16) ..= floor(hi/16)` (division by 16 is exact): every tile with a
-/// passing row is kept, a few without one may be.
-fn row_span(sp: &Splat, ty: u32, rx0: u32, rx1: u32) -> [u32; 2] {
+/// Row masks of the tiles `[rx0, rx1)` of tile row `ty` into `masks` (one per tile);
+/// returns the span `[x0, x1)` from the first to the last non-zero one (empty: `x0 == x1`).
+/// Each row's chord `(lo, hi)` is computed once ([`Splat::chord`], as the kernels do); a
+/// tile `tx` gets bit `r` iff `hi ≥ 16·tx + 0.5 && lo ≤ 16·tx + 15.5`, the compares of
+/// [`Splat::reaches_row`] on the same f32 values, so the mask equals [`Splat::row_mask`]
+/// (unit-tested). Only tiles within the rows' hull `floor(lo/16) ..= floor(hi/16)` (exact:
+/// division by 16 is) can have a bit, so only those are tested.
+fn row_masks(sp: &Splat, ty: u32, rx0: u32, rx1: u32, masks: &mut [u16]) -> [u32; 2] {
     let y0 = ty * TILE_SIZE;
     let (r0, r1) = sp.rows(y0);
+    let mut chords = [(0.0f32, 0.0f32); TS];
     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    for r in r0..r1 {
-        let (a, b) = sp.chord(sp.row_dy(y0, r));
-        lo = lo.min(a);
-        hi = hi.max(b);
+    for (r, c) in chords.iter_mut().enumerate().take(r1).skip(r0) {
+        *c = sp.chord(sp.row_dy(y0, r));
+        // `min`/`max` skip NaN ends (which fail the kernels' compares too).
+        lo = lo.min(c.0);
+        hi = hi.max(c.1);
     }
-    // `min`/`max` skip NaN chord ends (which fail the kernels' compares too), so `lo`, `hi`
-    // are never NaN; `lo > hi` when no row has a chord.
     if lo > hi {
         return [rx0, rx0];
     }
     let ts = TS as f32;
     let clamp = |v: f32| (v.max(rx0 as f32).min(rx1 as f32)) as u32;
-    let (x0, x1) = (clamp((lo / ts).floor()), clamp((hi / ts).floor() + 1.0));
-    if x0 < x1 {
-        [x0, x1]
+    let (h0, h1) = (clamp((lo / ts).floor()), clamp((hi / ts).floor() + 1.0));
+    let mut span = [u32::MAX, 0];
+    for tx in h0..h1 {
+        let x0 = (tx * TILE_SIZE) as f32;
+        let mut m = 0u16;
+        for (r, &(a, b)) in chords.iter().enumerate().take(r1).skip(r0) {
+            m |= ((b >= x0 + 0.5 && a <= x0 + (ts - 0.5)) as u16) << r;
+        }
+        masks[(tx - rx0) as usize] = m;
+        if m != 0 {
+            span = [span[0].min(tx), tx + 1];
+        }
+    }
+    if span[0] < span[1] {
+        span
     } else {
         [rx0, rx0]
     }
 }
 
-/// Fills `spans` (one per tile row of `rect`, the 3.33σ box) and returns the bounding
-/// rectangle of the kept tiles (all zero when none).
-fn cull_spans(p: &Projected, rect: [u32; 4], cull: Cull, spans: &mut [[u32; 2]]) -> [u32; 4] {
+/// Fills `spans` (one per tile row of `rect`, the 3.33σ box) and, with [`Cull::Exact`],
+/// `masks` (one per tile of `rect`, zeroed); returns the bounding rectangle of the kept
+/// tiles (all zero when none).
+fn cull_spans(
+    p: &Projected,
+    rect: [u32; 4],
+    cull: Cull,
+    spans: &mut [[u32; 2]],
+    masks: &mut [u16],
+) -> [u32; 4] {
     let [x0, x1, y0, y1] = rect;
     if cull == Cull::Box3Sigma {
         spans.fill([x0, x1]);
         return rect;
     }
     let sp = Splat::new(p.mean2d, p.conic, p.opacity, p.rgb);
+    let w = (x1 - x0) as usize;
     let mut bound = [u32::MAX, 0, u32::MAX, 0];
     for (ty, s) in (y0..y1).zip(spans.iter_mut()) {
-        *s = row_span(&sp, ty, x0, x1);
+        let row = (ty - y0) as usize * w;
+        *s = row_masks(&sp, ty, x0, x1, &mut masks[row..row + w]);
         if s[0] < s[1] {
             bound = [
                 bound[0].min(s[0]),
@@ -160,8 +205,16 @@ impl Bins {
         self.slot_start.last().copied().unwrap_or(0)
     }
 
-    pub fn tile_list(&self, tile: usize) -> &[u32] {
-        &self.ids[self.offsets[tile]..self.offsets[tile + 1]]
+    pub fn tile_list(&self, tile: usize) -> TileList<'_> {
+        let range = self.offsets[tile]..self.offsets[tile + 1];
+        TileList {
+            masks: if self.masks.is_empty() {
+                &[]
+            } else {
+                &self.masks[range.clone()]
+            },
+            ranks: &self.ids[range],
+        }
     }
 
     /// Gradient slot of the Gaussian of depth rank `rank` in tile `(tx, ty)`, which must
@@ -173,40 +226,51 @@ impl Bins {
     }
 
     /// Replaces each 3.33σ rectangle in `rects` by the bounding box of its kept tiles and
-    /// fills `spans` / `span_at` (parallel over chunks of Gaussians).
+    /// fills `spans`, `box_masks` and `span_at` (parallel over chunks of Gaussians).
     fn cull(&mut self, proj: &[Projected], cull: Cull) {
         self.span_at.clear();
-        let mut total = 0;
+        let (mut rows, mut area) = (0, 0);
         for r in &self.rects {
+            let (w, h) = ((r[1] - r[0]) as usize, (r[3] - r[2]) as usize);
             self.span_at.push(SpanAt {
-                start: total,
+                start: rows,
+                mask: area,
+                x0: r[0],
                 y0: r[2],
+                w: w as u32,
             });
-            total += (r[3] - r[2]) as usize;
+            (rows, area) = (rows + h, area + w * h);
         }
-        self.spans.clear();
-        self.spans.resize(total, [0; 2]);
-        // Disjoint (Gaussians, spans) chunks for the parallel jobs.
+        resize(&mut self.spans, rows, [0; 2]);
+        let exact = cull == Cull::Exact;
+        resize(&mut self.box_masks, if exact { area } else { 0 }, 0);
+        // Disjoint (Gaussians, spans, masks) chunks for the parallel jobs.
         const CHUNK: usize = 2048;
-        let starts: Vec<usize> = (0..proj.len().div_ceil(CHUNK))
-            .map(|c| self.span_at[c * CHUNK].start)
-            .chain([total])
-            .collect();
-        let mut jobs = Vec::with_capacity(starts.len());
-        let (mut spans, mut rects) = (&mut self.spans[..], &mut self.rects[..]);
-        for (c, w) in starts.windows(2).enumerate() {
-            let (s, s_rest) = std::mem::take(&mut spans).split_at_mut(w[1] - w[0]);
-            let n = rects.len().min(CHUNK);
-            let (r, r_rest) = std::mem::take(&mut rects).split_at_mut(n);
-            (spans, rects) = (s_rest, r_rest);
-            jobs.push((c * CHUNK, s, r));
+        let mut jobs = Vec::with_capacity(proj.len().div_ceil(CHUNK));
+        let (mut spans, mut masks) = (&mut self.spans[..], &mut self.box_masks[..]);
+        let mut rects = &mut self.rects[..];
+        for (c, at) in self.span_at.chunks(CHUNK).enumerate() {
+            let next = self.span_at.get((c + 1) * CHUNK);
+            let (s_end, m_end) = next.map_or((rows, area), |a| (a.start, a.mask));
+            let (s, s_rest) = std::mem::take(&mut spans).split_at_mut(s_end - at[0].start);
+            let m_len = if exact { m_end - at[0].mask } else { 0 };
+            let (m, m_rest) = std::mem::take(&mut masks).split_at_mut(m_len);
+            let (r, r_rest) = std::mem::take(&mut rects).split_at_mut(at.len());
+            (spans, masks, rects) = (s_rest, m_rest, r_rest);
+            jobs.push((c * CHUNK, s, m, r));
         }
-        jobs.into_par_iter().for_each(|(g0, spans, rects)| {
-            let mut off = 0;
+        jobs.into_par_iter().for_each(|(g0, spans, masks, rects)| {
+            let (mut so, mut mo) = (0, 0);
             for (j, rect) in rects.iter_mut().enumerate() {
                 let h = (rect[3] - rect[2]) as usize;
-                *rect = cull_spans(&proj[g0 + j], *rect, cull, &mut spans[off..off + h]);
-                off += h;
+                let a = if exact {
+                    h * (rect[1] - rect[0]) as usize
+                } else {
+                    0
+                };
+                let (s, m) = (&mut spans[so..so + h], &mut masks[mo..mo + a]);
+                *rect = cull_spans(&proj[g0 + j], *rect, cull, s, m);
+                (so, mo) = (so + h, mo + a);
             }
         });
     }
@@ -260,16 +324,22 @@ impl Bins {
         let sp = Spans {
             rects,
             spans: &self.spans,
+            masks: &self.box_masks,
             at: &self.span_at,
         };
         count_bands(&sp, tx, (0, ty), bands, &mut self.offsets[1..]);
         for t in 0..n_tiles {
             self.offsets[t + 1] += self.offsets[t];
         }
-        self.ids.clear();
-        self.ids.resize(self.offsets[n_tiles], 0);
+        let n = self.offsets[n_tiles];
+        resize(&mut self.ids, n, 0);
+        resize(&mut self.masks, if sp.masks.is_empty() { 0 } else { n }, 0);
         self.cursor.clear();
         self.cursor.extend_from_slice(&self.offsets[..n_tiles]);
+        let out = ListsOut {
+            ids: &mut self.ids,
+            masks: &mut self.masks,
+        };
         fill_bands(
             &self.keys,
             &sp,
@@ -277,17 +347,46 @@ impl Bins {
             (0, ty),
             bands,
             &mut self.cursor,
-            &mut self.ids,
+            out,
             0,
         );
     }
 }
 
-/// What the band jobs read of each Gaussian: its rectangle and its rows' spans.
+/// What the band jobs read of each Gaussian: its rectangle, its rows' spans and its box
+/// masks (empty with [`Cull::Box3Sigma`]).
 struct Spans<'a> {
     rects: &'a [[u32; 4]],
     spans: &'a [[u32; 2]],
+    masks: &'a [u16],
     at: &'a [SpanAt],
+}
+
+/// The part of the tile lists (ids and, if any, masks) a band job writes.
+struct ListsOut<'a> {
+    ids: &'a mut [u32],
+    masks: &'a mut [u16],
+}
+
+impl<'a> ListsOut<'a> {
+    fn split_at(self, at: usize) -> (ListsOut<'a>, ListsOut<'a>) {
+        let (ia, ib) = self.ids.split_at_mut(at);
+        let (ma, mb) = if self.masks.is_empty() {
+            (self.masks, &mut [][..])
+        } else {
+            self.masks.split_at_mut(at)
+        };
+        (
+            ListsOut { ids: ia, masks: ma },
+            ListsOut { ids: ib, masks: mb },
+        )
+    }
+}
+
+/// Sets `v` to `len` copies of `fill`, reusing its allocation.
+fn resize<T: Clone>(v: &mut Vec<T>, len: usize, fill: T) {
+    v.clear();
+    v.resize(len, fill);
 }
 
 /// Counts the intersections of each tile in tile rows `rows` into `counts` (one slot per
@@ -308,15 +407,15 @@ fn count_bands(sp: &Spans, tx: usize, rows: (usize, usize), bands: usize, counts
             let row = (y - rows.0) * tx;
             let [x0, x1] = at.span(sp.spans, y);
             for x in x0..x1 {
-                counts[row + x as usize] += 1;
+                counts[row + x as usize] += (at.mask(sp.masks, x as usize, y) != 0) as usize;
             }
         }
     }
 }
 
 /// Writes each Gaussian (in depth order) into the lists of the tiles of rows `rows`.
-/// `cursor` holds those tiles' next write positions (absolute), `ids` is the part of the
-/// id buffer that starts at absolute position `base`.
+/// `cursor` holds those tiles' next write positions (absolute), `out` is the part of the
+/// lists that starts at absolute position `base`.
 #[allow(clippy::too_many_arguments)]
 fn fill_bands(
     keys: &[u64],
@@ -325,14 +424,14 @@ fn fill_bands(
     rows: (usize, usize),
     bands: usize,
     cursor: &mut [usize],
-    ids: &mut [u32],
+    out: ListsOut,
     base: usize,
 ) {
     if bands > 1 && rows.1 - rows.0 > 1 {
         let mid = rows.0 + (rows.1 - rows.0) / 2;
         let (clo, chi) = cursor.split_at_mut((mid - rows.0) * tx);
-        let split = chi.first().map_or(base + ids.len(), |&c| c);
-        let (ilo, ihi) = ids.split_at_mut(split - base);
+        let split = chi.first().map_or(base + out.ids.len(), |&c| c);
+        let (ilo, ihi) = out.split_at(split - base);
         rayon::join(
             || fill_bands(keys, sp, tx, (rows.0, mid), bands / 2, clo, ilo, base),
             || {
@@ -357,10 +456,18 @@ fn fill_bands(
         let (ya, yb) = ((y0 as usize).max(rows.0), (y1 as usize).min(rows.1));
         for y in ya..yb {
             let row = (y - rows.0) * tx;
-            let [x0, x1] = sp.at[gid].span(sp.spans, y);
+            let at = sp.at[gid];
+            let [x0, x1] = at.span(sp.spans, y);
             for x in x0..x1 {
+                let m = at.mask(sp.masks, x as usize, y);
+                if m == 0 {
+                    continue;
+                }
                 let c = &mut cursor[row + x as usize];
-                ids[*c - base] = rank as u32;
+                out.ids[*c - base] = rank as u32;
+                if !out.masks.is_empty() {
+                    out.masks[*c - base] = m;
+                }
                 *c += 1;
             }
         }
@@ -404,7 +511,8 @@ mod tests {
         }
     }
 
-    /// Every tile of the 3.33σ box that `Cull::Exact` drops is one in which (1) no pixel row
+    /// Binning's row masks equal the kernels' own [`Splat::row_mask`] on every tile of the
+    /// 3.33σ box, and every tile that `Cull::Exact` drops is one in which (1) no pixel row
     /// passes the kernels' row tests and (2) no pixel reaches α ≥ 1/255 in the kernels' own
     /// arithmetic (σ in f32, the polynomial exp). (1) is what makes images and gradients
     /// bit-identical; (2) holds through the row tests' margins (without them it fails, as
@@ -418,14 +526,19 @@ mod tests {
         for _ in 0..20_000 {
             let p = random_projected(&mut rng);
             let rect = tile_rect(&p, tiles, tiles);
-            let h = (rect[3] - rect[2]) as usize;
+            let (w, h) = ((rect[1] - rect[0]) as usize, (rect[3] - rect[2]) as usize);
             let mut spans = vec![[0u32; 2]; h];
-            let bound = cull_spans(&p, rect, Cull::Exact, &mut spans);
+            let mut masks = vec![0u16; w * h];
+            let bound = cull_spans(&p, rect, Cull::Exact, &mut spans, &mut masks);
             let sp = Splat::new(p.mean2d, p.conic, p.opacity, p.rgb);
             for ty in rect[2]..rect[3] {
                 let [sx0, sx1] = spans[(ty - rect[2]) as usize];
                 for tx in rect[0]..rect[1] {
-                    if sx0 <= tx && tx < sx1 {
+                    let m = masks[(ty - rect[2]) as usize * w + (tx - rect[0]) as usize];
+                    let want = sp.row_mask(tx * TILE_SIZE, ty * TILE_SIZE);
+                    assert_eq!(m, want, "tile ({tx}, {ty}): {p:?}");
+                    assert!(m == 0 || (sx0 <= tx && tx < sx1));
+                    if m != 0 {
                         kept += 1;
                         assert!(bound[0] <= tx && tx < bound[1] && bound[2] <= ty && ty < bound[3]);
                         continue;

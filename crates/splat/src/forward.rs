@@ -91,6 +91,20 @@ impl Splat {
         self.my - (y0 as f32 + r as f32 + 0.5)
     }
 
+    /// Bit `r` set for each row `r` of the tile at pixel `(x0, y0)` that the kernels
+    /// evaluate: inside [`Splat::rows`] and passing [`Splat::reaches_row`]. Binning computes
+    /// the same bits from the rows' chords once per Gaussian (`bin.rs`, [`crate::Cull::Exact`]);
+    /// this is the reference and the path of [`crate::Cull::Box3Sigma`].
+    #[inline(always)]
+    pub fn row_mask(&self, x0: u32, y0: u32) -> u16 {
+        let (r0, r1) = self.rows(y0);
+        let mut m = 0u16;
+        for r in r0..r1 {
+            m |= (self.reaches_row(self.row_dy(y0, r), x0 as f32) as u16) << r;
+        }
+        m
+    }
+
     /// Rows `[r0, r1)` of the tile starting at pixel row `y0` that the Gaussian may reach.
     #[inline(always)]
     pub fn rows(&self, y0: u32) -> (usize, usize) {
@@ -135,12 +149,32 @@ pub(crate) struct TileOut<'a> {
 /// an unfinished pixel (0 unless [`TileCtx::count_alpha`]).
 pub(crate) type PairCounts = (u64, u64);
 
-/// Renders one tile; returns its [`PairCounts`].
-/// `list` holds depth ranks indexing `splats`; `gids` maps a rank to its global index.
+/// A tile's list: depth ranks indexing the splats and, when binning computed them
+/// ([`crate::Cull::Exact`]), each entry's [`Splat::row_mask`] (else empty: the kernels
+/// compute it).
+#[derive(Clone, Copy)]
+pub(crate) struct TileList<'a> {
+    pub ranks: &'a [u32],
+    pub masks: &'a [u16],
+}
+
+impl TileList<'_> {
+    /// Rows of entry `pos` (splat `sp`) the kernels evaluate in the tile at `(x0, y0)`.
+    #[inline(always)]
+    pub fn rows(&self, pos: usize, sp: &Splat, x0: u32, y0: u32) -> u16 {
+        if self.masks.is_empty() {
+            sp.row_mask(x0, y0)
+        } else {
+            self.masks[pos]
+        }
+    }
+}
+
+/// Renders one tile; returns its [`PairCounts`]. `gids` maps a rank to its global index.
 pub(crate) fn render_tile(
     simd: Simd,
     ctx: &TileCtx,
-    list: &[u32],
+    list: TileList,
     splats: &[Splat],
     gids: &[u32],
     out: TileOut,
@@ -186,7 +220,7 @@ pub(crate) fn render_tile(
 #[target_feature(enable = "avx2,fma")]
 unsafe fn tile_avx2<const TOPK: bool>(
     ctx: &TileCtx,
-    list: &[u32],
+    list: TileList,
     splats: &[Splat],
     gids: &[u32],
     out: TileOut,
@@ -198,7 +232,7 @@ unsafe fn tile_avx2<const TOPK: bool>(
 #[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn tile_avx512<const TOPK: bool>(
     ctx: &TileCtx,
-    list: &[u32],
+    list: TileList,
     splats: &[Splat],
     gids: &[u32],
     out: TileOut,
@@ -212,7 +246,8 @@ struct State {
     tfin: [f32; TP],
     col: [[f32; TP]; 3],
     last: [u32; TP],
-    live: [bool; TS],
+    /// Bit `r`: row `r` has unfinished pixels.
+    live: u16,
     /// Smallest weight in each pixel's top-k list (0 while not full), so that the common
     /// "no insertion" case is one vector compare per row.
     kmin: [f32; TP],
@@ -225,12 +260,12 @@ impl State {
             tfin: [1.0; TP],
             col: [[0.0; TP]; 3],
             last: [0; TP],
-            live: [false; TS],
+            live: 0,
             kmin: [0.0; TP],
         };
         for r in 0..ctx.rows {
             s.t[r * TS..r * TS + ctx.cols].fill(1.0);
-            s.live[r] = true;
+            s.live |= 1 << r;
         }
         s
     }
@@ -239,7 +274,7 @@ impl State {
 #[inline(always)]
 fn tile_impl<const TOPK: bool, const COUNT: bool>(
     ctx: &TileCtx,
-    list: &[u32],
+    list: TileList,
     splats: &[Splat],
     gids: &[u32],
     out: TileOut,
@@ -248,17 +283,14 @@ fn tile_impl<const TOPK: bool, const COUNT: bool>(
     let px: [f32; TS] = std::array::from_fn(|l| ctx.x0 as f32 + l as f32 + 0.5);
     let mut wrow = [0.0f32; TS];
     let (mut pairs, mut alpha_pairs) = (0u64, 0u64);
-    for (pos, &rank) in list.iter().enumerate() {
+    for (pos, &rank) in list.ranks.iter().enumerate() {
         let sp = &splats[rank as usize];
-        let (r0, r1) = sp.rows(ctx.y0);
-        for r in r0..r1 {
-            if !s.live[r] {
-                continue;
-            }
+        // Rows in increasing order, as a loop over [r0, r1) testing each would visit them.
+        let mut todo = list.rows(pos, sp, ctx.x0, ctx.y0) & s.live;
+        while todo != 0 {
+            let r = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
             let dy = sp.row_dy(ctx.y0, r);
-            if !sp.reaches_row(dy, ctx.x0 as f32) {
-                continue;
-            }
             pairs += TS as u64;
             let span = r * TS..(r + 1) * TS;
             let row = Row {
@@ -276,7 +308,9 @@ fn tile_impl<const TOPK: bool, const COUNT: bool>(
                 alpha_pairs += count_alpha_row(sp, &px, dy, row.t);
             }
             let live = composite_row(sp, &px, dy, pos as u32 + 1, row, cols, &mut wrow);
-            s.live[r] = live;
+            if !live {
+                s.live &= !(1 << r);
+            }
             if TOPK {
                 let kmin: &mut [f32; TS] = (&mut s.kmin[span]).try_into().expect("16");
                 if wrow
@@ -289,7 +323,7 @@ fn tile_impl<const TOPK: bool, const COUNT: bool>(
                 }
             }
         }
-        if (pos & 7) == 7 && !s.live.iter().any(|&l| l) {
+        if (pos & 7) == 7 && s.live == 0 {
             break;
         }
     }

@@ -331,7 +331,7 @@ impl Rasterizer {
         // own slot, so no two jobs write the same memory and the reduction order is fixed.
         (0..n_tiles).into_par_iter().for_each(|tile| {
             let list = bins.tile_list(tile);
-            if list.is_empty() {
+            if list.ranks.is_empty() {
                 return;
             }
             let (tx, ty) = (tile % bins.tiles_x, tile / bins.tiles_x);

@@ -21,6 +21,7 @@
 
 use crate::forward::{Splat, TileList, TS};
 use crate::project::Projected;
+use crate::raster::Simd;
 use crate::{Cull, TILE_SIZE};
 use rayon::prelude::*;
 
@@ -122,30 +123,41 @@ fn tile_rect(p: &Projected, tiles_x: usize, tiles_y: usize) -> [u32; 4] {
 /// [`Splat::reaches_row`] on the same f32 values, so the mask equals [`Splat::row_mask`]
 /// (unit-tested). Only tiles within the rows' hull `floor(lo/16) ..= floor(hi/16)` (exact:
 /// division by 16 is) can have a bit, so only those are tested.
+#[inline(always)]
 fn row_masks(sp: &Splat, ty: u32, rx0: u32, rx1: u32, masks: &mut [u16]) -> [u32; 2] {
     let y0 = ty * TILE_SIZE;
     let (r0, r1) = sp.rows(y0);
-    let mut chords = [(0.0f32, 0.0f32); TS];
-    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    for (r, c) in chords.iter_mut().enumerate().take(r1).skip(r0) {
-        *c = sp.chord(sp.row_dy(y0, r));
-        // `min`/`max` skip NaN ends (which fail the kernels' compares too).
-        lo = lo.min(c.0);
-        hi = hi.max(c.1);
+    if r0 == r1 {
+        return [rx0, rx0];
     }
-    if lo > hi {
+    // All 16 rows branch-free (one vector); rows outside [r0, r1) and NaN chords (which
+    // fail the kernels' compares too) get the empty chord (+∞, −∞).
+    let (mut lo, mut hi) = ([0.0f32; TS], [0.0f32; TS]);
+    for r in 0..TS {
+        let (a, b) = sp.chord(sp.row_dy(y0, r));
+        let on = (r >= r0) & (r < r1) & (a <= b);
+        lo[r] = if on { a } else { f32::INFINITY };
+        hi[r] = if on { b } else { f32::NEG_INFINITY };
+    }
+    let (lo_all, hi_all) = (reduce16(lo, |a, b| if b < a { b } else { a }), {
+        reduce16(hi, |a, b| if b > a { b } else { a })
+    });
+    if lo_all > hi_all {
         return [rx0, rx0];
     }
     let ts = TS as f32;
     let clamp = |v: f32| (v.max(rx0 as f32).min(rx1 as f32)) as u32;
-    let (h0, h1) = (clamp((lo / ts).floor()), clamp((hi / ts).floor() + 1.0));
+    let (h0, h1) = (
+        clamp((lo_all / ts).floor()),
+        clamp((hi_all / ts).floor() + 1.0),
+    );
     let mut span = [u32::MAX, 0];
     for tx in h0..h1 {
         let x0 = (tx * TILE_SIZE) as f32;
-        let mut m = 0u16;
-        for (r, &(a, b)) in chords.iter().enumerate().take(r1).skip(r0) {
-            m |= ((b >= x0 + 0.5 && a <= x0 + (ts - 0.5)) as u16) << r;
-        }
+        let bits: [u16; TS] = std::array::from_fn(|r| {
+            (((hi[r] >= x0 + 0.5) & (lo[r] <= x0 + (ts - 0.5))) as u16) << r
+        });
+        let m = bits.iter().fold(0, |a, b| a | b);
         masks[(tx - rx0) as usize] = m;
         if m != 0 {
             span = [span[0].min(tx), tx + 1];
@@ -158,9 +170,18 @@ fn row_masks(sp: &Splat, ty: u32, rx0: u32, rx1: u32, masks: &mut [u16]) -> [u32
     }
 }
 
+/// Pairwise reduction of 16 lanes (a tree, so it vectorizes; `f` must not see NaN).
+#[inline(always)]
+fn reduce16(v: [f32; TS], f: impl Fn(f32, f32) -> f32) -> f32 {
+    let v8: [f32; 8] = std::array::from_fn(|i| f(v[i], v[i + 8]));
+    let v4: [f32; 4] = std::array::from_fn(|i| f(v8[i], v8[i + 4]));
+    f(f(v4[0], v4[2]), f(v4[1], v4[3]))
+}
+
 /// Fills `spans` (one per tile row of `rect`, the 3.33σ box) and, with [`Cull::Exact`],
 /// `masks` (one per tile of `rect`, zeroed); returns the bounding rectangle of the kept
 /// tiles (all zero when none).
+#[inline(always)]
 fn cull_spans(
     p: &Projected,
     rect: [u32; 4],
@@ -192,6 +213,62 @@ fn cull_spans(
         bound
     } else {
         [0; 4]
+    }
+}
+
+/// One parallel job of [`Bins::cull`]: a chunk of Gaussians with their spans, box masks
+/// and rectangles.
+struct CullJob<'a> {
+    proj: &'a [Projected],
+    cull: Cull,
+    spans: &'a mut [[u32; 2]],
+    masks: &'a mut [u16],
+    rects: &'a mut [[u32; 4]],
+}
+
+impl CullJob<'_> {
+    /// Runs at the widest vector level (the 16 rows' chords are one AVX-512 vector); the
+    /// arithmetic is the same at every level (no FMA contraction), so are the masks.
+    fn run(self, simd: Simd) {
+        #[cfg(target_arch = "x86_64")]
+        match simd {
+            // SAFETY: `simd_level` checked that the CPU supports these features.
+            Simd::Avx512 => return unsafe { self.run_avx512() },
+            // SAFETY: as above.
+            Simd::Avx2 => return unsafe { self.run_avx2() },
+            Simd::Portable => {}
+        }
+        let _ = simd;
+        self.run_impl()
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    unsafe fn run_avx512(self) {
+        self.run_impl()
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn run_avx2(self) {
+        self.run_impl()
+    }
+
+    #[inline(always)]
+    fn run_impl(self) {
+        let exact = self.cull == Cull::Exact;
+        let (mut so, mut mo) = (0, 0);
+        for (p, rect) in self.proj.iter().zip(self.rects.iter_mut()) {
+            let h = (rect[3] - rect[2]) as usize;
+            let a = if exact {
+                h * (rect[1] - rect[0]) as usize
+            } else {
+                0
+            };
+            let (s, m) = (&mut self.spans[so..so + h], &mut self.masks[mo..mo + a]);
+            *rect = cull_spans(p, *rect, self.cull, s, m);
+            (so, mo) = (so + h, mo + a);
+        }
     }
 }
 
@@ -227,7 +304,7 @@ impl Bins {
 
     /// Replaces each 3.33σ rectangle in `rects` by the bounding box of its kept tiles and
     /// fills `spans`, `box_masks` and `span_at` (parallel over chunks of Gaussians).
-    fn cull(&mut self, proj: &[Projected], cull: Cull) {
+    fn cull(&mut self, proj: &[Projected], cull: Cull, simd: Simd) {
         self.span_at.clear();
         let (mut rows, mut area) = (0, 0);
         for r in &self.rects {
@@ -260,22 +337,19 @@ impl Bins {
             jobs.push((c * CHUNK, s, m, r));
         }
         jobs.into_par_iter().for_each(|(g0, spans, masks, rects)| {
-            let (mut so, mut mo) = (0, 0);
-            for (j, rect) in rects.iter_mut().enumerate() {
-                let h = (rect[3] - rect[2]) as usize;
-                let a = if exact {
-                    h * (rect[1] - rect[0]) as usize
-                } else {
-                    0
-                };
-                let (s, m) = (&mut spans[so..so + h], &mut masks[mo..mo + a]);
-                *rect = cull_spans(&proj[g0 + j], *rect, cull, s, m);
-                (so, mo) = (so + h, mo + a);
-            }
+            let job = CullJob {
+                proj: &proj[g0..g0 + rects.len()],
+                cull,
+                spans,
+                masks,
+                rects,
+            };
+            job.run(simd);
         });
     }
 
-    pub fn build(&mut self, proj: &[Projected], width: u32, height: u32, cull: Cull) {
+    pub fn build(&mut self, proj: &[Projected], size: (u32, u32), cull: Cull, simd: Simd) {
+        let (width, height) = size;
         let ts = TILE_SIZE as usize;
         self.tiles_x = (width as usize).div_ceil(ts);
         self.tiles_y = (height as usize).div_ceil(ts);
@@ -284,7 +358,7 @@ impl Bins {
         self.rects.clear();
         self.rects
             .par_extend(proj.par_iter().map(|p| tile_rect(p, tx, ty)));
-        self.cull(proj, cull);
+        self.cull(proj, cull, simd);
         self.keys.clear();
         let rects = &self.rects;
         self.keys.par_extend(

@@ -143,8 +143,8 @@ impl Rasterizer {
         self.depths.clear();
         self.depths.extend(self.proj.iter().map(|p| p.depth));
         let t1 = Instant::now();
-        self.bins
-            .build(&self.proj, cam.width, cam.height, opts.cull);
+        let size = (cam.width, cam.height);
+        self.bins.build(&self.proj, size, opts.cull, self.simd());
         // Splats in depth order: tile lists (depth ranks) then read memory forwards.
         let proj = &self.proj;
         self.splats.clear();

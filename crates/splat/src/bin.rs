@@ -47,14 +47,16 @@ pub(crate) struct Bins {
     /// tile) in the backward instead of a dependent chain through `order` and `rects`.
     slot_geom: Vec<SlotGeom>,
     keys: Vec<u64>,
-    /// Tile rectangle `[x0, x1, y0, y1)` of each Gaussian (by global index): the bounding
-    /// box of its kept tiles (with [`Cull::Box3Sigma`], its whole 3.33σ box).
-    pub rects: Vec<[u32; 4]>,
-    /// Kept tiles `[x0, x1)` of each tile row of each Gaussian's 3.33σ box, Gaussian after
-    /// Gaussian; `span_at[g]` says where Gaussian `g`'s rows start.
+    /// 3.33σ tile rectangle `[x0, x1, y0, y1)` of each Gaussian (by global index).
+    rects: Vec<[u32; 4]>,
+    /// Tile rectangle of each rank: the bounding box of its kept tiles (with
+    /// [`Cull::Box3Sigma`], its whole 3.33σ box).
+    rank_rects: Vec<[u32; 4]>,
+    /// Kept tiles `[x0, x1)` of each tile row of each rank's 3.33σ box, rank after rank;
+    /// `span_at[rank]` says where its rows start.
     spans: Vec<[u32; 2]>,
-    /// With [`Cull::Exact`]: the row mask of every tile of each Gaussian's 3.33σ box
-    /// (row-major; 0 = dropped), Gaussian after Gaussian.
+    /// With [`Cull::Exact`]: the row mask of every tile of each rank's 3.33σ box
+    /// (row-major; 0 = dropped), rank after rank.
     box_masks: Vec<u16>,
     span_at: Vec<SpanAt>,
     cursor: Vec<usize>,
@@ -124,7 +126,13 @@ fn tile_rect(p: &Projected, tiles_x: usize, tiles_y: usize) -> [u32; 4] {
 /// (unit-tested). Only tiles within the rows' hull `floor(lo/16) ..= floor(hi/16)` (exact:
 /// division by 16 is) can have a bit, so only those are tested.
 #[inline(always)]
-fn row_masks(sp: &Splat, ty: u32, rx0: u32, rx1: u32, masks: &mut [u16]) -> [u32; 2] {
+fn row_masks<const AVX512: bool>(
+    sp: &Splat,
+    ty: u32,
+    rx0: u32,
+    rx1: u32,
+    masks: &mut [u16],
+) -> [u32; 2] {
     let y0 = ty * TILE_SIZE;
     let (r0, r1) = sp.rows(y0);
     if r0 == r1 {
@@ -154,10 +162,17 @@ fn row_masks(sp: &Splat, ty: u32, rx0: u32, rx1: u32, masks: &mut [u16]) -> [u32
     let mut span = [u32::MAX, 0];
     for tx in h0..h1 {
         let x0 = (tx * TILE_SIZE) as f32;
-        let bits: [u16; TS] = std::array::from_fn(|r| {
-            (((hi[r] >= x0 + 0.5) & (lo[r] <= x0 + (ts - 0.5))) as u16) << r
-        });
-        let m = bits.iter().fold(0, |a, b| a | b);
+        let m = if AVX512 {
+            // SAFETY: `AVX512` is only set by `CullJob::run_avx512`, which has the feature.
+            #[cfg(target_arch = "x86_64")]
+            unsafe {
+                tile_bits_avx512(&lo, &hi, x0)
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            tile_bits(&lo, &hi, x0)
+        } else {
+            tile_bits(&lo, &hi, x0)
+        };
         masks[(tx - rx0) as usize] = m;
         if m != 0 {
             span = [span[0].min(tx), tx + 1];
@@ -168,6 +183,31 @@ fn row_masks(sp: &Splat, ty: u32, rx0: u32, rx1: u32, masks: &mut [u16]) -> [u32
     } else {
         [rx0, rx0]
     }
+}
+
+/// Bit `r` set where row `r`'s chord `[lo, hi]` meets the pixel centres of the tile at
+/// `x0`: the compares of [`Splat::reaches_row`] (reference of [`tile_bits_avx512`]).
+#[inline(always)]
+fn tile_bits(lo: &[f32; TS], hi: &[f32; TS], x0: f32) -> u16 {
+    let mut m = 0u16;
+    for r in 0..TS {
+        m |= (((hi[r] >= x0 + 0.5) & (lo[r] <= x0 + (TS as f32 - 0.5))) as u16) << r;
+    }
+    m
+}
+
+/// [`tile_bits`] as two 16-lane compares into mask registers (ordered compares: false for
+/// NaN, as Rust's `>=`/`<=`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+unsafe fn tile_bits_avx512(lo: &[f32; TS], hi: &[f32; TS], x0: f32) -> u16 {
+    use std::arch::x86_64::*;
+    // SAFETY: 16 f32 per array, unaligned loads.
+    let (l, h) = unsafe { (_mm512_loadu_ps(lo.as_ptr()), _mm512_loadu_ps(hi.as_ptr())) };
+    let ge = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(h, _mm512_set1_ps(x0 + 0.5));
+    let le = _mm512_cmp_ps_mask::<_CMP_LE_OQ>(l, _mm512_set1_ps(x0 + (TS as f32 - 0.5)));
+    ge & le
 }
 
 /// Pairwise reduction of 16 lanes (a tree, so it vectorizes; `f` must not see NaN).
@@ -182,8 +222,8 @@ fn reduce16(v: [f32; TS], f: impl Fn(f32, f32) -> f32) -> f32 {
 /// `masks` (one per tile of `rect`, zeroed); returns the bounding rectangle of the kept
 /// tiles (all zero when none).
 #[inline(always)]
-fn cull_spans(
-    p: &Projected,
+fn cull_spans<const AVX512: bool>(
+    sp: &Splat,
     rect: [u32; 4],
     cull: Cull,
     spans: &mut [[u32; 2]],
@@ -194,12 +234,11 @@ fn cull_spans(
         spans.fill([x0, x1]);
         return rect;
     }
-    let sp = Splat::new(p.mean2d, p.conic, p.opacity, p.rgb);
     let w = (x1 - x0) as usize;
     let mut bound = [u32::MAX, 0, u32::MAX, 0];
     for (ty, s) in (y0..y1).zip(spans.iter_mut()) {
         let row = (ty - y0) as usize * w;
-        *s = row_masks(&sp, ty, x0, x1, &mut masks[row..row + w]);
+        *s = row_masks::<AVX512>(sp, ty, x0, x1, &mut masks[row..row + w]);
         if s[0] < s[1] {
             bound = [
                 bound[0].min(s[0]),
@@ -216,14 +255,16 @@ fn cull_spans(
     }
 }
 
-/// One parallel job of [`Bins::cull`]: a chunk of Gaussians with their spans, box masks
-/// and rectangles.
+/// One parallel job of [`Bins::cull`]: a chunk of ranks (`gids`: their Gaussians) with
+/// their spans, box masks, rectangles and splats.
 struct CullJob<'a> {
     proj: &'a [Projected],
+    gids: &'a [u32],
     cull: Cull,
     spans: &'a mut [[u32; 2]],
     masks: &'a mut [u16],
     rects: &'a mut [[u32; 4]],
+    splats: &'a mut [Splat],
 }
 
 impl CullJob<'_> {
@@ -239,26 +280,29 @@ impl CullJob<'_> {
             Simd::Portable => {}
         }
         let _ = simd;
-        self.run_impl()
+        self.run_impl::<false>()
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,avx2,fma")]
     unsafe fn run_avx512(self) {
-        self.run_impl()
+        self.run_impl::<true>()
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     unsafe fn run_avx2(self) {
-        self.run_impl()
+        self.run_impl::<false>()
     }
 
     #[inline(always)]
-    fn run_impl(self) {
+    fn run_impl<const AVX512: bool>(self) {
         let exact = self.cull == Cull::Exact;
         let (mut so, mut mo) = (0, 0);
-        for (p, rect) in self.proj.iter().zip(self.rects.iter_mut()) {
+        let per_rank = self.gids.iter().zip(self.rects.iter_mut());
+        for ((&g, rect), out) in per_rank.zip(self.splats.iter_mut()) {
+            let p = &self.proj[g as usize];
+            *out = Splat::new(p.mean2d, p.conic, p.opacity, p.rgb);
             let h = (rect[3] - rect[2]) as usize;
             let a = if exact {
                 h * (rect[1] - rect[0]) as usize
@@ -266,7 +310,7 @@ impl CullJob<'_> {
                 0
             };
             let (s, m) = (&mut self.spans[so..so + h], &mut self.masks[mo..mo + a]);
-            *rect = cull_spans(p, *rect, self.cull, s, m);
+            *rect = cull_spans::<AVX512>(out, *rect, self.cull, s, m);
             (so, mo) = (so + h, mo + a);
         }
     }
@@ -302,12 +346,14 @@ impl Bins {
         g.start + (ty - g.y0 as usize) * g.width as usize + (tx - g.x0 as usize)
     }
 
-    /// Replaces each 3.33σ rectangle in `rects` by the bounding box of its kept tiles and
-    /// fills `spans`, `box_masks` and `span_at` (parallel over chunks of Gaussians).
-    fn cull(&mut self, proj: &[Projected], cull: Cull, simd: Simd) {
+    /// Culls the ranks' 3.33σ boxes (`rank_rects` on entry) into the bounding boxes of
+    /// their kept tiles, filling `spans`, `box_masks` and `span_at`, and writes each rank's
+    /// splat; in rank order (sequential writes, one read of each Gaussian), parallel over
+    /// chunks of ranks.
+    fn cull(&mut self, proj: &[Projected], cull: Cull, simd: Simd, splats: &mut [Splat]) {
         self.span_at.clear();
         let (mut rows, mut area) = (0, 0);
-        for r in &self.rects {
+        for r in &self.rank_rects {
             let (w, h) = ((r[1] - r[0]) as usize, (r[3] - r[2]) as usize);
             self.span_at.push(SpanAt {
                 start: rows,
@@ -321,11 +367,11 @@ impl Bins {
         resize(&mut self.spans, rows, [0; 2]);
         let exact = cull == Cull::Exact;
         resize(&mut self.box_masks, if exact { area } else { 0 }, 0);
-        // Disjoint (Gaussians, spans, masks) chunks for the parallel jobs.
+        // Disjoint (ranks, spans, masks, rects, splats) chunks for the parallel jobs.
         const CHUNK: usize = 2048;
-        let mut jobs = Vec::with_capacity(proj.len().div_ceil(CHUNK));
+        let mut jobs = Vec::with_capacity(self.order.len().div_ceil(CHUNK));
         let (mut spans, mut masks) = (&mut self.spans[..], &mut self.box_masks[..]);
-        let mut rects = &mut self.rects[..];
+        let (mut rects, mut sps) = (&mut self.rank_rects[..], splats);
         for (c, at) in self.span_at.chunks(CHUNK).enumerate() {
             let next = self.span_at.get((c + 1) * CHUNK);
             let (s_end, m_end) = next.map_or((rows, area), |a| (a.start, a.mask));
@@ -333,32 +379,58 @@ impl Bins {
             let m_len = if exact { m_end - at[0].mask } else { 0 };
             let (m, m_rest) = std::mem::take(&mut masks).split_at_mut(m_len);
             let (r, r_rest) = std::mem::take(&mut rects).split_at_mut(at.len());
-            (spans, masks, rects) = (s_rest, m_rest, r_rest);
-            jobs.push((c * CHUNK, s, m, r));
+            let (p, p_rest) = std::mem::take(&mut sps).split_at_mut(at.len());
+            (spans, masks, rects, sps) = (s_rest, m_rest, r_rest, p_rest);
+            let gids = &self.order[c * CHUNK..c * CHUNK + at.len()];
+            jobs.push((gids, s, m, r, p));
         }
-        jobs.into_par_iter().for_each(|(g0, spans, masks, rects)| {
-            let job = CullJob {
-                proj: &proj[g0..g0 + rects.len()],
-                cull,
-                spans,
-                masks,
-                rects,
-            };
-            job.run(simd);
-        });
+        jobs.into_par_iter()
+            .for_each(|(gids, spans, masks, rects, splats)| {
+                let job = CullJob {
+                    proj,
+                    gids,
+                    cull,
+                    spans,
+                    masks,
+                    rects,
+                    splats,
+                };
+                job.run(simd);
+            });
     }
 
-    pub fn build(&mut self, proj: &[Projected], size: (u32, u32), cull: Cull, simd: Simd) {
+    /// Bins `proj` and writes the visible Gaussians' splats in depth order into `splats`.
+    pub fn build(
+        &mut self,
+        proj: &[Projected],
+        size: (u32, u32),
+        (cull, simd): (Cull, Simd),
+        splats: &mut Vec<Splat>,
+    ) {
         let (width, height) = size;
         let ts = TILE_SIZE as usize;
         self.tiles_x = (width as usize).div_ceil(ts);
         self.tiles_y = (height as usize).div_ceil(ts);
-        let n_tiles = self.tiles_x * self.tiles_y;
         let (tx, ty) = (self.tiles_x, self.tiles_y);
         self.rects.clear();
         self.rects
             .par_extend(proj.par_iter().map(|p| tile_rect(p, tx, ty)));
-        self.cull(proj, cull, simd);
+        self.sort_visible(proj);
+        // Ranks whose culled rectangle is empty stay in the order with no tiles and no
+        // slots: their gradient sums are zero, as a Gaussian outside the order gets.
+        let rects = &self.rects;
+        self.rank_rects.clear();
+        self.rank_rects
+            .par_extend(self.order.par_iter().map(|&g| rects[g as usize]));
+        splats.clear();
+        splats.resize(self.order.len(), Splat::default());
+        self.cull(proj, cull, simd, splats);
+        self.slots();
+        self.fill_lists(tx, ty);
+    }
+
+    /// `keys`, `order`, `rank_of`: the Gaussians with a non-empty 3.33σ box, by depth.
+    fn sort_visible(&mut self, proj: &[Projected]) {
         self.keys.clear();
         let rects = &self.rects;
         self.keys.par_extend(
@@ -375,13 +447,18 @@ impl Bins {
             .par_extend(self.keys.par_iter().map(|&k| k as u32));
         self.rank_of.clear();
         self.rank_of.resize(proj.len(), u32::MAX);
+        for (rank, &gid) in self.order.iter().enumerate() {
+            self.rank_of[gid as usize] = rank as u32;
+        }
+    }
+
+    /// `slot_start` and `slot_geom` from the ranks' (culled) rectangles.
+    fn slots(&mut self) {
         self.slot_start.clear();
         self.slot_start.push(0);
         self.slot_geom.clear();
         let mut slots = 0;
-        for (rank, &gid) in self.order.iter().enumerate() {
-            self.rank_of[gid as usize] = rank as u32;
-            let [x0, x1, y0, y1] = self.rects[gid as usize];
+        for &[x0, x1, y0, y1] in &self.rank_rects {
             self.slot_geom.push(SlotGeom {
                 start: slots,
                 x0,
@@ -391,12 +468,16 @@ impl Bins {
             slots += (x1 - x0) as usize * (y1 - y0) as usize;
             self.slot_start.push(slots);
         }
+    }
 
+    /// The tile lists: a counting pass, prefix sums, a filling pass (banded, parallel).
+    fn fill_lists(&mut self, tx: usize, ty: usize) {
+        let n_tiles = tx * ty;
         self.offsets.clear();
         self.offsets.resize(n_tiles + 1, 0);
         let bands = ty.min(4 * rayon::current_num_threads()).max(1);
         let sp = Spans {
-            rects,
+            rects: &self.rank_rects,
             spans: &self.spans,
             masks: &self.box_masks,
             at: &self.span_at,
@@ -414,16 +495,8 @@ impl Bins {
             ids: &mut self.ids,
             masks: &mut self.masks,
         };
-        fill_bands(
-            &self.keys,
-            &sp,
-            tx,
-            (0, ty),
-            bands,
-            &mut self.cursor,
-            out,
-            0,
-        );
+        let job = (tx, (0, ty), bands);
+        fill_bands(&sp, job, &mut self.cursor, out, 0);
     }
 }
 
@@ -487,50 +560,37 @@ fn count_bands(sp: &Spans, tx: usize, rows: (usize, usize), bands: usize, counts
     }
 }
 
-/// Writes each Gaussian (in depth order) into the lists of the tiles of rows `rows`.
-/// `cursor` holds those tiles' next write positions (absolute), `out` is the part of the
-/// lists that starts at absolute position `base`.
-#[allow(clippy::too_many_arguments)]
+/// Writes each rank (in depth order) into the lists of the tiles of tile rows `rows`,
+/// `job = (tiles_x, rows, bands)`. `cursor` holds those tiles' next write positions
+/// (absolute), `out` is the part of the lists that starts at absolute position `base`.
 fn fill_bands(
-    keys: &[u64],
     sp: &Spans,
-    tx: usize,
-    rows: (usize, usize),
-    bands: usize,
+    job: (usize, (usize, usize), usize),
     cursor: &mut [usize],
     out: ListsOut,
     base: usize,
 ) {
+    let (tx, rows, bands) = job;
     if bands > 1 && rows.1 - rows.0 > 1 {
         let mid = rows.0 + (rows.1 - rows.0) / 2;
         let (clo, chi) = cursor.split_at_mut((mid - rows.0) * tx);
         let split = chi.first().map_or(base + out.ids.len(), |&c| c);
-        let (ilo, ihi) = out.split_at(split - base);
+        let (olo, ohi) = out.split_at(split - base);
+        let (jlo, jhi) = (
+            (tx, (rows.0, mid), bands / 2),
+            (tx, (mid, rows.1), bands - bands / 2),
+        );
         rayon::join(
-            || fill_bands(keys, sp, tx, (rows.0, mid), bands / 2, clo, ilo, base),
-            || {
-                fill_bands(
-                    keys,
-                    sp,
-                    tx,
-                    (mid, rows.1),
-                    bands - bands / 2,
-                    chi,
-                    ihi,
-                    split,
-                )
-            },
+            || fill_bands(sp, jlo, clo, olo, base),
+            || fill_bands(sp, jhi, chi, ohi, split),
         );
         return;
     }
     // Lists hold depth ranks: the kernels then read the rank-ordered splats forwards.
-    for (rank, &key) in keys.iter().enumerate() {
-        let gid = key as u32 as usize;
-        let [_, _, y0, y1] = sp.rects[gid];
+    for (rank, (&[_, _, y0, y1], &at)) in sp.rects.iter().zip(sp.at).enumerate() {
         let (ya, yb) = ((y0 as usize).max(rows.0), (y1 as usize).min(rows.1));
         for y in ya..yb {
             let row = (y - rows.0) * tx;
-            let at = sp.at[gid];
             let [x0, x1] = at.span(sp.spans, y);
             for x in x0..x1 {
                 let m = at.mask(sp.masks, x as usize, y);
@@ -603,8 +663,8 @@ mod tests {
             let (w, h) = ((rect[1] - rect[0]) as usize, (rect[3] - rect[2]) as usize);
             let mut spans = vec![[0u32; 2]; h];
             let mut masks = vec![0u16; w * h];
-            let bound = cull_spans(&p, rect, Cull::Exact, &mut spans, &mut masks);
             let sp = Splat::new(p.mean2d, p.conic, p.opacity, p.rgb);
+            let bound = cull_spans::<false>(&sp, rect, Cull::Exact, &mut spans, &mut masks);
             for ty in rect[2]..rect[3] {
                 let [sx0, sx1] = spans[(ty - rect[2]) as usize];
                 for tx in rect[0]..rect[1] {

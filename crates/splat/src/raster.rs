@@ -144,15 +144,10 @@ impl Rasterizer {
         self.depths.extend(self.proj.iter().map(|p| p.depth));
         let t1 = Instant::now();
         let size = (cam.width, cam.height);
-        self.bins.build(&self.proj, size, opts.cull, self.simd());
-        // Splats in depth order: tile lists (depth ranks) then read memory forwards.
-        let proj = &self.proj;
-        self.splats.clear();
-        self.splats
-            .par_extend(self.bins.order.par_iter().map(|&gid| {
-                let p = &proj[gid as usize];
-                Splat::new(p.mean2d, p.conic, p.opacity, p.rgb)
-            }));
+        let mode = (opts.cull, self.simd());
+        // Binning also writes the splats in depth order (tile lists hold depth ranks, so
+        // the kernels read memory forwards).
+        self.bins.build(&self.proj, size, mode, &mut self.splats);
         let t2 = Instant::now();
         self.rasterize(cam, opts);
         let t3 = Instant::now();

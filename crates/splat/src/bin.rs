@@ -123,8 +123,8 @@ fn tile_rect(p: &Projected, tiles_x: usize, tiles_y: usize) -> [u32; 4] {
 /// Each row's chord `(lo, hi)` is computed once ([`Splat::chord`], as the kernels do); a
 /// tile `tx` gets bit `r` iff `hi ≥ 16·tx + 0.5 && lo ≤ 16·tx + 15.5`, the compares of
 /// [`Splat::reaches_row`] on the same f32 values, so the mask equals [`Splat::row_mask`]
-/// (unit-tested). Only tiles within the rows' hull `floor(lo/16) ..= floor(hi/16)` (exact:
-/// division by 16 is) can have a bit, so only those are tested.
+/// (unit-tested). Every tile of the box is tested, so that no branch waits on the chords
+/// (the loop is latency-bound otherwise: square root, reductions, mispredicted exits).
 #[inline(always)]
 fn row_masks<const AVX512: bool>(
     sp: &Splat,
@@ -135,9 +135,6 @@ fn row_masks<const AVX512: bool>(
 ) -> [u32; 2] {
     let y0 = ty * TILE_SIZE;
     let (r0, r1) = sp.rows(y0);
-    if r0 == r1 {
-        return [rx0, rx0];
-    }
     // All 16 rows branch-free (one vector); rows outside [r0, r1) and NaN chords (which
     // fail the kernels' compares too) get the empty chord (+∞, −∞).
     let (mut lo, mut hi) = ([0.0f32; TS], [0.0f32; TS]);
@@ -147,20 +144,8 @@ fn row_masks<const AVX512: bool>(
         lo[r] = if on { a } else { f32::INFINITY };
         hi[r] = if on { b } else { f32::NEG_INFINITY };
     }
-    let (lo_all, hi_all) = (reduce16(lo, |a, b| if b < a { b } else { a }), {
-        reduce16(hi, |a, b| if b > a { b } else { a })
-    });
-    if lo_all > hi_all {
-        return [rx0, rx0];
-    }
-    let ts = TS as f32;
-    let clamp = |v: f32| (v.max(rx0 as f32).min(rx1 as f32)) as u32;
-    let (h0, h1) = (
-        clamp((lo_all / ts).floor()),
-        clamp((hi_all / ts).floor() + 1.0),
-    );
     let mut span = [u32::MAX, 0];
-    for tx in h0..h1 {
+    for (tx, out) in (rx0..rx1).zip(masks.iter_mut()) {
         let x0 = (tx * TILE_SIZE) as f32;
         let m = if AVX512 {
             // SAFETY: `AVX512` is only set by `CullJob::run_avx512`, which has the feature.
@@ -173,10 +158,12 @@ fn row_masks<const AVX512: bool>(
         } else {
             tile_bits(&lo, &hi, x0)
         };
-        masks[(tx - rx0) as usize] = m;
-        if m != 0 {
-            span = [span[0].min(tx), tx + 1];
-        }
+        *out = m;
+        let on = m != 0;
+        span = [
+            if on { span[0].min(tx) } else { span[0] },
+            if on { tx + 1 } else { span[1] },
+        ];
     }
     if span[0] < span[1] {
         span
@@ -208,14 +195,6 @@ unsafe fn tile_bits_avx512(lo: &[f32; TS], hi: &[f32; TS], x0: f32) -> u16 {
     let ge = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(h, _mm512_set1_ps(x0 + 0.5));
     let le = _mm512_cmp_ps_mask::<_CMP_LE_OQ>(l, _mm512_set1_ps(x0 + (TS as f32 - 0.5)));
     ge & le
-}
-
-/// Pairwise reduction of 16 lanes (a tree, so it vectorizes; `f` must not see NaN).
-#[inline(always)]
-fn reduce16(v: [f32; TS], f: impl Fn(f32, f32) -> f32) -> f32 {
-    let v8: [f32; 8] = std::array::from_fn(|i| f(v[i], v[i + 8]));
-    let v4: [f32; 4] = std::array::from_fn(|i| f(v8[i], v8[i + 4]));
-    f(f(v4[0], v4[2]), f(v4[1], v4[3]))
 }
 
 /// Fills `spans` (one per tile row of `rect`, the 3.33σ box) and, with [`Cull::Exact`],

@@ -198,7 +198,7 @@ unsafe fn tile_bits_avx512(lo: &[f32; TS], hi: &[f32; TS], x0: f32) -> u16 {
 }
 
 /// Fills `spans` (one per tile row of `rect`, the 3.33σ box) and, with [`Cull::Exact`],
-/// `masks` (one per tile of `rect`, zeroed); returns the bounding rectangle of the kept
+/// `masks` (one per tile of `rect`); returns the bounding rectangle of the kept
 /// tiles (all zero when none).
 #[inline(always)]
 fn cull_spans<const AVX512: bool>(
@@ -479,8 +479,8 @@ impl Bins {
     }
 }
 
-/// What the band jobs read of each Gaussian: its rectangle, its rows' spans and its box
-/// masks (empty with [`Cull::Box3Sigma`]).
+/// What the band jobs read of each rank (in depth order): its rectangle, its rows' spans
+/// and its box masks (empty with [`Cull::Box3Sigma`]).
 struct Spans<'a> {
     rects: &'a [[u32; 4]],
     spans: &'a [[u32; 2]],

@@ -2,7 +2,8 @@
 //!
 //! Conventions (docs/architecture.md): OpenCV camera axes, world→camera 4×4, pixel centres
 //! at +0.5, 2D covariance + `eps2d` (0.3) on the diagonal, near plane z ≤ 0.01 culled,
-//! per-axis 3.33σ boxes, 16×16 tiles, depth sort, `alpha = min(0.999, o·exp(-σ))`, skip
+//! per-axis 3.33σ boxes (binned to the tiles their `σ ≤ ln(255·o)` ellipse reaches: [`Cull`]),
+//! 16×16 tiles, depth sort, `alpha = min(0.999, o·exp(-σ))`, skip
 //! `alpha < 1/255`, stop before the Gaussian that would make `T·(1−alpha) ≤ 1e-4`, zero
 //! gradient where the 0.999 clamp binds, `C = Σ cᵢαᵢTᵢ + T_final·background`.
 //!

@@ -248,3 +248,37 @@ fn alpha_pair_counter() {
     }
     assert_eq!(counts[0], counts[1]);
 }
+
+/// Nothing to bin (no Gaussians; all behind the camera): both cullings give the background
+/// and zero gradients, with no intersections.
+#[test]
+fn empty_scenes() {
+    let mut behind = Scene::random(5, 50, 40, 30, None);
+    for m in behind.means.chunks_mut(3) {
+        m[2] = -m[2];
+    }
+    let mut none = Scene::random(5, 1, 40, 30, None);
+    for v in [
+        &mut none.means,
+        &mut none.quats,
+        &mut none.scales,
+        &mut none.logits,
+        &mut none.colors,
+    ] {
+        v.clear();
+    }
+    let dl = vec![0.5f32; 40 * 30 * 3];
+    for (what, sc) in [("behind", &behind), ("none", &none)] {
+        let g = sc.gaussians();
+        let opts = RenderOptions {
+            background: [0.25, 0.5, 0.75],
+            ..Default::default()
+        };
+        for cull in [Cull::Exact, Cull::Box3Sigma] {
+            let r = run(&g, &sc.cam, &opts, cull, &dl, None);
+            assert_eq!(r.stats.tile_intersections, 0, "{what} {cull:?}");
+            assert!(r.image.chunks(3).all(|p| p == [0.25, 0.5, 0.75]), "{what}");
+            assert!(r.grads.means.iter().all(|&v| v == 0.0), "{what}");
+        }
+    }
+}

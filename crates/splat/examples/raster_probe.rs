@@ -3,8 +3,13 @@
 //!
 //! `cargo run --release -p splat --example raster_probe -- [a|b|probe|case03] [reps]`
 //! (`/usr/bin/time -v` around it gives the peak memory of a scenario).
+//!
+//! `-- cull [a|b|cases] [reps]`: the exact tile culling against gsplat's 3.33σ boxes
+//! (issue 17) in one process: intersections, gradient slots, evaluated pairs and pairs with
+//! α ≥ 1/255 of each, then forward and backward timed alternately (`reps` rounds, each one
+//! forward + backward per culling, order swapped every round), medians and ratios.
 
-use splat::{Gradients, Rasterizer, RenderOptions};
+use splat::{Camera, Cull, Gaussians, Gradients, Rasterizer, RenderOptions};
 use std::time::Instant;
 
 #[path = "../benches/scene_gen.rs"]
@@ -57,7 +62,7 @@ fn scenario(n: usize, w: u32, h: u32, reps: usize) {
     });
     let out = r.forward(&g, &scene.cam, &opts).expect("forward");
     let visible = out.radii.iter().filter(|r| r[0] > 0).count();
-    let (isects, pairs) = (out.n_isects, r.evaluated_pairs());
+    let (isects, pairs) = (out.stats.tile_intersections, out.stats.evaluated_pairs);
     println!(
         "N {n} {w}x{h}: visible {visible}, intersections {isects}, evaluated pairs {pairs}\n\
          forward {f:.4} s ({:.3e} pairs/s), backward {b:.4} s ({:.3e} pairs/s), \
@@ -130,6 +135,104 @@ fn case03(reps: usize) {
     );
 }
 
+/// Counts and alternated timings of both cullings on one scene (see the header).
+fn cull_compare(name: &str, g: &Gaussians, cam: &Camera, base: &RenderOptions, reps: usize) {
+    let culls = [Cull::Box3Sigma, Cull::Exact];
+    let dl: Vec<f32> = (0..(cam.width * cam.height * 3) as usize)
+        .map(|i| (i % 7) as f32 / 7.0 - 0.5)
+        .collect();
+    let mut rs: Vec<Rasterizer> = culls.iter().map(|_| Rasterizer::new()).collect();
+    let opts: Vec<RenderOptions> = culls
+        .iter()
+        .map(|&cull| RenderOptions {
+            cull,
+            ..base.clone()
+        })
+        .collect();
+    for ((r, o), c) in rs.iter_mut().zip(&opts).zip(culls) {
+        r.set_count_alpha_pairs(true);
+        let st = r.forward(g, cam, o).expect("forward").stats;
+        r.set_count_alpha_pairs(false);
+        let a = st.alpha_pairs.unwrap_or(0);
+        println!(
+            "{name} {c:?}: intersections {}, gradient slots {}, evaluated pairs {}, \
+             pairs with alpha >= 1/255 {a} ({:.1} % of evaluated)",
+            st.tile_intersections,
+            st.gradient_slots,
+            st.evaluated_pairs,
+            100.0 * a as f64 / st.evaluated_pairs.max(1) as f64
+        );
+    }
+    // [cull][forward, backward, forward tiles, backward tiles, forward binning, backward
+    // slot reduction + zeroing]
+    let mut t = vec![vec![Vec::new(); 6]; 2];
+    let mut grads = Gradients::default();
+    for rep in 0..reps {
+        for k in [rep % 2, 1 - rep % 2] {
+            let (r, o) = (&mut rs[k], &opts[k]);
+            let t0 = Instant::now();
+            r.forward(g, cam, o).expect("forward");
+            let ft = r.timings();
+            let t1 = Instant::now();
+            r.backward(g, cam, o, &dl, None, &mut grads)
+                .expect("backward");
+            let bt = r.timings();
+            t[k][0].push((t1 - t0).as_secs_f64());
+            t[k][1].push(t1.elapsed().as_secs_f64());
+            t[k][2].push(ft.raster);
+            t[k][3].push(bt.raster);
+            t[k][4].push(ft.bin);
+            t[k][5].push(bt.bin + bt.finish);
+        }
+    }
+    let m: Vec<Vec<f64>> = t
+        .into_iter()
+        .map(|v| v.into_iter().map(median).collect())
+        .collect();
+    let ms = |v: f64| v * 1e3;
+    for (k, c) in culls.iter().enumerate() {
+        println!(
+            "{name} {c:?}: forward {:.2} ms (binning {:.2}, tiles {:.2}), backward {:.2} ms \
+             (tiles {:.2}, slots {:.2}), forward+backward {:.2} ms (medians of {reps})",
+            ms(m[k][0]),
+            ms(m[k][4]),
+            ms(m[k][2]),
+            ms(m[k][1]),
+            ms(m[k][3]),
+            ms(m[k][5]),
+            ms(m[k][0] + m[k][1])
+        );
+    }
+    println!(
+        "{name} Box3Sigma/Exact: forward {:.3}x, backward {:.3}x, forward+backward {:.3}x",
+        m[0][0] / m[1][0],
+        m[0][1] / m[1][1],
+        (m[0][0] + m[0][1]) / (m[1][0] + m[1][1])
+    );
+}
+
+fn cull(which: &str, reps: usize) {
+    match which {
+        "cases" => {
+            for stem in common::CASES {
+                let (case, _) = common::Case::load(stem);
+                cull_compare(stem, &case.gaussians(), &case.cam, &case.opts, reps);
+            }
+        }
+        "b" | "a" => {
+            let (n, w, h) = if which == "b" {
+                (500_000, 1440, 1080)
+            } else {
+                (100_000, 800, 800)
+            };
+            let scene = scene_gen::BenchScene::new(7, n, w, h);
+            let opts = RenderOptions::default();
+            cull_compare(which, &scene.gaussians(), &scene.cam, &opts, reps);
+        }
+        _ => panic!("cull [a|b|cases] [reps]"),
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let reps = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(3);
@@ -137,6 +240,10 @@ fn main() {
         Some("b") => scenario(500_000, 1440, 1080, reps),
         Some("probe") => probe(),
         Some("case03") => case03(reps),
+        Some("cull") => {
+            let reps = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(5);
+            cull(args.get(2).map_or("a", String::as_str), reps)
+        }
         _ => scenario(100_000, 800, 800, reps),
     }
 }

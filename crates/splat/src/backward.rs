@@ -12,7 +12,7 @@
 //! deterministic).
 
 use crate::fastexp;
-use crate::forward::{Splat, ALPHA_MAX, ALPHA_MIN, TP, TS};
+use crate::forward::{Splat, TileList, ALPHA_MAX, ALPHA_MIN, TP, TS};
 use crate::raster::Simd;
 
 /// Gradient sums of one Gaussian: mean2d x, y; conic a, b, c; rgb; opacity.
@@ -33,7 +33,7 @@ pub(crate) struct TileGradIn<'a> {
 pub(crate) fn backward_tile(
     simd: Simd,
     tin: &TileGradIn,
-    list: &[u32],
+    list: TileList,
     splats: &[Splat],
     emit: &mut impl FnMut(usize, &GradAcc),
 ) {
@@ -53,7 +53,7 @@ pub(crate) fn backward_tile(
 #[target_feature(enable = "avx2,fma")]
 unsafe fn backward_avx2(
     tin: &TileGradIn,
-    list: &[u32],
+    list: TileList,
     splats: &[Splat],
     emit: &mut impl FnMut(usize, &GradAcc),
 ) {
@@ -64,7 +64,7 @@ unsafe fn backward_avx2(
 #[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn backward_avx512(
     tin: &TileGradIn,
-    list: &[u32],
+    list: TileList,
     splats: &[Splat],
     emit: &mut impl FnMut(usize, &GradAcc),
 ) {
@@ -79,7 +79,7 @@ struct BackState {
 #[inline(always)]
 fn backward_impl(
     tin: &TileGradIn,
-    list: &[u32],
+    list: TileList,
     splats: &[Splat],
     emit: &mut impl FnMut(usize, &GradAcc),
 ) {
@@ -92,26 +92,27 @@ fn backward_impl(
             .unwrap_or(0);
     }
     let max_last = row_last.iter().copied().max().unwrap_or(0) as usize;
+    let ranks = list.ranks;
     let mut st = BackState {
         t: [0.0; TP],
         buf: [[0.0; TP]; 3],
     };
     st.t.copy_from_slice(&tin.tfin[..TP]);
     let px: [f32; TS] = std::array::from_fn(|l| tin.x0 as f32 + l as f32 + 0.5);
-    for pos in (0..max_last.min(list.len())).rev() {
-        let rank = list[pos] as usize;
+    for pos in (0..max_last.min(ranks.len())).rev() {
+        let rank = ranks[pos] as usize;
         let sp = &splats[rank];
-        let (r0, r1) = sp.rows(tin.y0);
         let mut sums = [[0.0f32; TS]; 9];
         let mut touched = false;
-        for (r, &rl) in row_last.iter().enumerate().take(r1).skip(r0) {
-            if pos as u32 >= rl {
+        // The forward's rows, in increasing order.
+        let mut todo = list.rows(pos, sp, tin.x0, tin.y0);
+        while todo != 0 {
+            let r = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            if pos as u32 >= row_last[r] {
                 continue;
             }
-            let dy = sp.my - (tin.y0 as f32 + r as f32 + 0.5);
-            if !sp.reaches_row(dy, tin.x0 as f32) {
-                continue;
-            }
+            let dy = sp.row_dy(tin.y0, r);
             touched = true;
             backward_row(sp, &px, dy, pos as u32 + 1, r, tin, &mut st, &mut sums);
         }

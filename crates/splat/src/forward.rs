@@ -68,11 +68,41 @@ impl Splat {
     /// them the kernels would composite nothing, so the result is unchanged.
     #[inline(always)]
     pub fn reaches_row(&self, dy: f32, x0: f32) -> bool {
+        let (lo, hi) = self.chord(dy);
+        hi >= x0 + 0.5 && lo <= x0 + (TS as f32 - 0.5)
+    }
+
+    /// The row's chord `[centre − half, centre + half]` of [`Splat::reaches_row`], with its
+    /// margins. Binning (`bin.rs`, [`crate::Cull::Exact`]) calls this same function, so it
+    /// keeps exactly the tiles in which some row passes this test.
+    #[inline(always)]
+    pub fn chord(&self, dy: f32) -> (f32, f32) {
         let disc = self.thr2 * self.a - dy * dy * (self.a * self.c - self.b * self.b);
         let inv_a = 1.0 / self.a;
         let half = disc.max(0.0).sqrt() * inv_a * 1.001 + 0.01;
         let centre = self.mx + self.b * dy * inv_a;
-        centre + half >= x0 + 0.5 && centre - half <= x0 + (TS as f32 - 0.5)
+        (centre - half, centre + half)
+    }
+
+    /// `my − y` at the centre of row `r` of the tile starting at pixel row `y0`, in the
+    /// kernels' own f32 order of operations.
+    #[inline(always)]
+    pub fn row_dy(&self, y0: u32, r: usize) -> f32 {
+        self.my - (y0 as f32 + r as f32 + 0.5)
+    }
+
+    /// Bit `r` set for each row `r` of the tile at pixel `(x0, y0)` that the kernels
+    /// evaluate: inside [`Splat::rows`] and passing [`Splat::reaches_row`]. Binning computes
+    /// the same bits from the rows' chords once per Gaussian (`bin.rs`, [`crate::Cull::Exact`]);
+    /// this is the reference and the path of [`crate::Cull::Box3Sigma`].
+    #[inline(always)]
+    pub fn row_mask(&self, x0: u32, y0: u32) -> u16 {
+        let (r0, r1) = self.rows(y0);
+        let mut m = 0u16;
+        for r in r0..r1 {
+            m |= (self.reaches_row(self.row_dy(y0, r), x0 as f32) as u16) << r;
+        }
+        m
     }
 
     /// Rows `[r0, r1)` of the tile starting at pixel row `y0` that the Gaussian may reach.
@@ -98,6 +128,8 @@ pub(crate) struct TileCtx {
     pub rows: usize,
     pub k: usize,
     pub bg: [f32; 3],
+    /// Also count the pairs with `α ≥ 1/255` (diagnostic, portable kernel).
+    pub count_alpha: bool,
 }
 
 /// One tile's slices of the tile-major output buffers.
@@ -113,16 +145,49 @@ pub(crate) struct TileOut<'a> {
     pub topk_w: &'a mut [f32],
 }
 
-/// Renders one tile; returns the number of (pixel, Gaussian) pairs evaluated.
-/// `list` holds depth ranks indexing `splats`; `gids` maps a rank to its global index.
+/// (pixel, Gaussian) pairs a tile job evaluated, and of those the ones with `α ≥ 1/255` at
+/// an unfinished pixel (0 unless [`TileCtx::count_alpha`]).
+pub(crate) type PairCounts = (u64, u64);
+
+/// A tile's list: depth ranks indexing the splats and, when binning computed them
+/// ([`crate::Cull::Exact`]), each entry's [`Splat::row_mask`] (else empty: the kernels
+/// compute it).
+#[derive(Clone, Copy)]
+pub(crate) struct TileList<'a> {
+    pub ranks: &'a [u32],
+    pub masks: &'a [u16],
+}
+
+impl TileList<'_> {
+    /// Rows of entry `pos` (splat `sp`) the kernels evaluate in the tile at `(x0, y0)`.
+    #[inline(always)]
+    pub fn rows(&self, pos: usize, sp: &Splat, x0: u32, y0: u32) -> u16 {
+        if self.masks.is_empty() {
+            sp.row_mask(x0, y0)
+        } else {
+            self.masks[pos]
+        }
+    }
+}
+
+/// Renders one tile; returns its [`PairCounts`]. `gids` maps a rank to its global index.
 pub(crate) fn render_tile(
     simd: Simd,
     ctx: &TileCtx,
-    list: &[u32],
+    list: TileList,
     splats: &[Splat],
     gids: &[u32],
     out: TileOut,
-) -> u64 {
+) -> PairCounts {
+    if ctx.count_alpha {
+        // Diagnostic path: same arithmetic (the levels are bit-identical), not vectorized
+        // for AVX, and the hot kernels below stay free of the counter.
+        return if ctx.k > 0 {
+            tile_impl::<true, true>(ctx, list, splats, gids, out)
+        } else {
+            tile_impl::<false, true>(ctx, list, splats, gids, out)
+        };
+    }
     #[cfg(target_arch = "x86_64")]
     match simd {
         // SAFETY: `simd_level` checked that the CPU supports these features.
@@ -145,9 +210,9 @@ pub(crate) fn render_tile(
     }
     let _ = simd;
     if ctx.k > 0 {
-        tile_impl::<true>(ctx, list, splats, gids, out)
+        tile_impl::<true, false>(ctx, list, splats, gids, out)
     } else {
-        tile_impl::<false>(ctx, list, splats, gids, out)
+        tile_impl::<false, false>(ctx, list, splats, gids, out)
     }
 }
 
@@ -155,24 +220,24 @@ pub(crate) fn render_tile(
 #[target_feature(enable = "avx2,fma")]
 unsafe fn tile_avx2<const TOPK: bool>(
     ctx: &TileCtx,
-    list: &[u32],
+    list: TileList,
     splats: &[Splat],
     gids: &[u32],
     out: TileOut,
-) -> u64 {
-    tile_impl::<TOPK>(ctx, list, splats, gids, out)
+) -> PairCounts {
+    tile_impl::<TOPK, false>(ctx, list, splats, gids, out)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn tile_avx512<const TOPK: bool>(
     ctx: &TileCtx,
-    list: &[u32],
+    list: TileList,
     splats: &[Splat],
     gids: &[u32],
     out: TileOut,
-) -> u64 {
-    tile_impl::<TOPK>(ctx, list, splats, gids, out)
+) -> PairCounts {
+    tile_impl::<TOPK, false>(ctx, list, splats, gids, out)
 }
 
 /// Per-pixel compositing state of a tile, row-major 16×16.
@@ -181,7 +246,8 @@ struct State {
     tfin: [f32; TP],
     col: [[f32; TP]; 3],
     last: [u32; TP],
-    live: [bool; TS],
+    /// Bit `r`: row `r` has unfinished pixels.
+    live: u16,
     /// Smallest weight in each pixel's top-k list (0 while not full), so that the common
     /// "no insertion" case is one vector compare per row.
     kmin: [f32; TP],
@@ -194,40 +260,37 @@ impl State {
             tfin: [1.0; TP],
             col: [[0.0; TP]; 3],
             last: [0; TP],
-            live: [false; TS],
+            live: 0,
             kmin: [0.0; TP],
         };
         for r in 0..ctx.rows {
             s.t[r * TS..r * TS + ctx.cols].fill(1.0);
-            s.live[r] = true;
+            s.live |= 1 << r;
         }
         s
     }
 }
 
 #[inline(always)]
-fn tile_impl<const TOPK: bool>(
+fn tile_impl<const TOPK: bool, const COUNT: bool>(
     ctx: &TileCtx,
-    list: &[u32],
+    list: TileList,
     splats: &[Splat],
     gids: &[u32],
     out: TileOut,
-) -> u64 {
+) -> PairCounts {
     let mut s = State::new(ctx);
     let px: [f32; TS] = std::array::from_fn(|l| ctx.x0 as f32 + l as f32 + 0.5);
     let mut wrow = [0.0f32; TS];
-    let mut pairs = 0u64;
-    for (pos, &rank) in list.iter().enumerate() {
+    let (mut pairs, mut alpha_pairs) = (0u64, 0u64);
+    for (pos, &rank) in list.ranks.iter().enumerate() {
         let sp = &splats[rank as usize];
-        let (r0, r1) = sp.rows(ctx.y0);
-        for r in r0..r1 {
-            if !s.live[r] {
-                continue;
-            }
-            let dy = sp.my - (ctx.y0 as f32 + r as f32 + 0.5);
-            if !sp.reaches_row(dy, ctx.x0 as f32) {
-                continue;
-            }
+        // Rows in increasing order, as a loop over [r0, r1) testing each would visit them.
+        let mut todo = list.rows(pos, sp, ctx.x0, ctx.y0) & s.live;
+        while todo != 0 {
+            let r = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let dy = sp.row_dy(ctx.y0, r);
             pairs += TS as u64;
             let span = r * TS..(r + 1) * TS;
             let row = Row {
@@ -241,8 +304,13 @@ fn tile_impl<const TOPK: bool>(
                 (&mut cg[span.clone()]).try_into().expect("16"),
                 (&mut cb[span.clone()]).try_into().expect("16"),
             ];
+            if COUNT {
+                alpha_pairs += count_alpha_row(sp, &px, dy, row.t);
+            }
             let live = composite_row(sp, &px, dy, pos as u32 + 1, row, cols, &mut wrow);
-            s.live[r] = live;
+            if !live {
+                s.live &= !(1 << r);
+            }
             if TOPK {
                 let kmin: &mut [f32; TS] = (&mut s.kmin[span]).try_into().expect("16");
                 if wrow
@@ -255,12 +323,25 @@ fn tile_impl<const TOPK: bool>(
                 }
             }
         }
-        if (pos & 7) == 7 && !s.live.iter().any(|&l| l) {
+        if (pos & 7) == 7 && s.live == 0 {
             break;
         }
     }
     finish(ctx, &s, out);
-    pairs
+    (pairs, alpha_pairs)
+}
+
+/// Pixels of one row where [`composite_row`] would find `σ ≥ 0`, `α ≥ 1/255` and the pixel
+/// unfinished (its `ok`), in its arithmetic.
+fn count_alpha_row(sp: &Splat, px: &[f32; TS], dy: f32, t: &[f32; TS]) -> u64 {
+    let mut n = 0;
+    for l in 0..TS {
+        let dx = sp.mx - px[l];
+        let sigma = 0.5 * (sp.a * dx * dx + sp.c * dy * dy) + sp.b * dx * dy;
+        let alpha = (sp.o * fastexp::exp(-sigma)).min(ALPHA_MAX);
+        n += ((sigma >= 0.0) & (alpha >= ALPHA_MIN) & (t[l] > 0.0)) as u64;
+    }
+    n
 }
 
 struct Row<'a> {

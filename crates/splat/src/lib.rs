@@ -2,7 +2,8 @@
 //!
 //! Conventions (docs/architecture.md): OpenCV camera axes, world→camera 4×4, pixel centres
 //! at +0.5, 2D covariance + `eps2d` (0.3) on the diagonal, near plane z ≤ 0.01 culled,
-//! per-axis 3.33σ boxes, 16×16 tiles, depth sort, `alpha = min(0.999, o·exp(-σ))`, skip
+//! per-axis 3.33σ boxes (binned to the tiles their `σ ≤ ln(255·o)` ellipse reaches: [`Cull`]),
+//! 16×16 tiles, depth sort, `alpha = min(0.999, o·exp(-σ))`, skip
 //! `alpha < 1/255`, stop before the Gaussian that would make `T·(1−alpha) ≤ 1e-4`, zero
 //! gradient where the 0.999 clamp binds, `C = Σ cᵢαᵢTᵢ + T_final·background`.
 //!
@@ -80,6 +81,26 @@ pub struct RenderOptions {
     pub eps2d: f32,
     /// Gaussians with camera z ≤ near_plane are culled (0.01).
     pub near_plane: f32,
+    /// Which (tile, Gaussian) pairs binning keeps; images, alphas, top-k and gradients are
+    /// bit-identical either way (tests/cull_equivalence.rs), only the work differs.
+    pub cull: Cull,
+}
+
+/// Tile culling at binning (issue 17). gsplat 1.5.3 bins every tile of a Gaussian's 3.33σ
+/// box; a pair contributes only where `o·e^{−σ} ≥ 1/255`, i.e. `σ ≤ ln(255·o)`, which
+/// gsplat's projection exploits since its PR #597 (opacity-aware radius), FlashGS and
+/// Speedy-Splat (SnugBox/AccuTile) with an exact ellipse–tile test.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Cull {
+    /// Only the tiles of the 3.33σ box in which some pixel row passes the tile kernels' own
+    /// opacity-aware row tests (the rows `|dy| ≤ hy` of `σ ≤ ln(255·o)`, then the row's
+    /// chord of that ellipse against the tile's pixel centres), so every dropped pair is one
+    /// the kernels would have skipped anyway: the image is unchanged.
+    #[default]
+    Exact,
+    /// Every tile of the 3.33σ box (gsplat `_isect_tiles`; the intersection count then
+    /// matches gsplat's `n_isects`).
+    Box3Sigma,
 }
 
 impl Default for RenderOptions {
@@ -89,6 +110,7 @@ impl Default for RenderOptions {
             topk: 0,
             eps2d: 0.3,
             near_plane: 0.01,
+            cull: Cull::Exact,
         }
     }
 }
@@ -112,8 +134,28 @@ pub struct ForwardOutput<'a> {
     pub means2d: &'a [[f32; 2]],
     /// `N` camera depths.
     pub depths: &'a [f32],
-    /// Number of (tile, Gaussian) intersections.
+    /// Number of (tile, Gaussian) intersections (= `stats.tile_intersections`).
     pub n_isects: usize,
+    /// Work counts of this pass.
+    pub stats: RasterStats,
+}
+
+/// Work counts of one forward pass ([`ForwardOutput::stats`], [`Rasterizer::stats`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RasterStats {
+    /// (tile, Gaussian) entries in the tile lists.
+    pub tile_intersections: u64,
+    /// Gradient slots the backward pass zeroes and reduces: the area of each Gaussian's
+    /// tile rectangle (≥ intersections; see `grad_slots`).
+    pub gradient_slots: u64,
+    /// (pixel, Gaussian) pairs the forward kernels evaluated: 16-pixel rows that passed the
+    /// row tests in rows with unfinished pixels, × 16.
+    pub evaluated_pairs: u64,
+    /// Of the evaluated pairs, those with `σ ≥ 0`, `α ≥ 1/255` at a still-unfinished
+    /// pixel (the ones that composite or end the pixel): the floor of any culling. Counted
+    /// only when [`Rasterizer::set_count_alpha_pairs`] is on (a slower, portable
+    /// diagnostic kernel with the same arithmetic), else `None`.
+    pub alpha_pairs: Option<u64>,
 }
 
 /// Gradients of a scalar loss with respect to every input of [`Gaussians`], same layouts.

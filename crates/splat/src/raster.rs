@@ -3,11 +3,13 @@
 
 use crate::backward::{backward_tile, GradAcc, TileGradIn};
 use crate::bin::Bins;
-use crate::forward::{render_tile, Splat, TileCtx, TileOut, TP, TS};
+use crate::forward::{render_tile, PairCounts, Splat, TileCtx, TileOut, TP, TS};
 use crate::grad_slots::{GradSlots, SlotWriter};
 use crate::project::{project, project_vjp, CamInfo, GaussGradMut, ProjGrad, Projected};
 use crate::validate::{validate_backward, validate_forward};
-use crate::{Camera, Colors, ForwardOutput, Gaussians, Gradients, RenderOptions, SplatError};
+use crate::{
+    Camera, Colors, ForwardOutput, Gaussians, Gradients, RasterStats, RenderOptions, SplatError,
+};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -45,7 +47,8 @@ pub struct Rasterizer {
     topk_weights: Vec<f32>,
     slots: GradSlots,
     proj_grads: Vec<GradAcc>,
-    fwd_pairs: u64,
+    stats: RasterStats,
+    count_alpha: bool,
     timings: Timings,
     /// (N, width, height) of the last forward pass.
     shape: Option<(usize, u32, u32)>,
@@ -87,7 +90,19 @@ impl Rasterizer {
     /// (pixel, Gaussian) pairs the last forward pass evaluated (rows of 16 pixels that a
     /// Gaussian's alpha can reach, in tiles where pixels were still unfinished).
     pub fn evaluated_pairs(&self) -> u64 {
-        self.fwd_pairs
+        self.stats.evaluated_pairs
+    }
+
+    /// Work counts of the last forward pass.
+    pub fn stats(&self) -> RasterStats {
+        self.stats
+    }
+
+    /// Whether forward passes also count the pairs with `α ≥ 1/255`
+    /// ([`RasterStats::alpha_pairs`]). Diagnostic: the tiles then run a portable kernel
+    /// with the counter (same results, slower).
+    pub fn set_count_alpha_pairs(&mut self, on: bool) {
+        self.count_alpha = on;
     }
 
     /// Caps the tile kernels' vector level (for A/B timings and the test that all levels
@@ -128,15 +143,11 @@ impl Rasterizer {
         self.depths.clear();
         self.depths.extend(self.proj.iter().map(|p| p.depth));
         let t1 = Instant::now();
-        self.bins.build(&self.proj, cam.width, cam.height);
-        // Splats in depth order: tile lists (depth ranks) then read memory forwards.
-        let proj = &self.proj;
-        self.splats.clear();
-        self.splats
-            .par_extend(self.bins.order.par_iter().map(|&gid| {
-                let p = &proj[gid as usize];
-                Splat::new(p.mean2d, p.conic, p.opacity, p.rgb)
-            }));
+        let size = (cam.width, cam.height);
+        let mode = (opts.cull, self.simd());
+        // Binning also writes the splats in depth order (tile lists hold depth ranks, so
+        // the kernels read memory forwards).
+        self.bins.build(&self.proj, size, mode, &mut self.splats);
         let t2 = Instant::now();
         self.rasterize(cam, opts);
         let t3 = Instant::now();
@@ -159,6 +170,7 @@ impl Rasterizer {
             means2d: &self.means2d,
             depths: &self.depths,
             n_isects: self.bins.n_isects(),
+            stats: self.stats,
         })
     }
 
@@ -171,9 +183,9 @@ impl Rasterizer {
         resize(&mut self.tile_topk_ids, n_tiles * TP * k, u32::MAX);
         resize(&mut self.tile_topk_w, n_tiles * TP * k, 0.0);
         let simd = self.simd();
-        let (bins, splats) = (&self.bins, &self.splats);
+        let (bins, splats, count) = (&self.bins, &self.splats, self.count_alpha);
         let run = |tile: usize, out: TileOut| {
-            let ctx = tile_ctx(tile, bins.tiles_x, cam, opts);
+            let ctx = tile_ctx(tile, bins.tiles_x, cam, opts, count);
             render_tile(simd, &ctx, bins.tile_list(tile), splats, &bins.order, out)
         };
         let main = self
@@ -182,7 +194,8 @@ impl Rasterizer {
             .zip(self.tile_tfin.par_chunks_mut(TP))
             .zip(self.tile_last.par_chunks_mut(TP))
             .enumerate();
-        self.fwd_pairs = if k == 0 {
+        let add = |a: PairCounts, b: PairCounts| (a.0 + b.0, a.1 + b.1);
+        let (pairs, alpha_pairs) = if k == 0 {
             main.map(|(t, ((color, tfin), last))| {
                 let (topk_ids, topk_w) = (&mut [][..], &mut [][..]);
                 run(
@@ -196,7 +209,7 @@ impl Rasterizer {
                     },
                 )
             })
-            .sum()
+            .reduce(|| (0, 0), add)
         } else {
             main.zip(self.tile_topk_ids.par_chunks_mut(TP * k))
                 .zip(self.tile_topk_w.par_chunks_mut(TP * k))
@@ -212,7 +225,13 @@ impl Rasterizer {
                         },
                     )
                 })
-                .sum()
+                .reduce(|| (0, 0), add)
+        };
+        self.stats = RasterStats {
+            tile_intersections: self.bins.n_isects() as u64,
+            gradient_slots: self.bins.n_slots() as u64,
+            evaluated_pairs: pairs,
+            alpha_pairs: self.count_alpha.then_some(alpha_pairs),
         };
     }
 
@@ -273,7 +292,7 @@ impl Rasterizer {
         validate_backward(g, cam, self.shape, dl_dimage, dl_dalpha)?;
         let t0 = Instant::now();
         let mut slots = std::mem::take(&mut self.slots);
-        let writer = slots.reset(self.bins.n_isects());
+        let writer = slots.reset(self.bins.n_slots());
         let t1 = Instant::now();
         self.accumulate_tiles(&writer, cam, opts, dl_dimage, dl_dalpha);
         self.slots = slots;
@@ -307,7 +326,7 @@ impl Rasterizer {
         // own slot, so no two jobs write the same memory and the reduction order is fixed.
         (0..n_tiles).into_par_iter().for_each(|tile| {
             let list = bins.tile_list(tile);
-            if list.is_empty() {
+            if list.ranks.is_empty() {
                 return;
             }
             let (tx, ty) = (tile % bins.tiles_x, tile / bins.tiles_x);
@@ -422,7 +441,13 @@ impl Rasterizer {
     }
 }
 
-fn tile_ctx(tile: usize, tiles_x: usize, cam: &Camera, opts: &RenderOptions) -> TileCtx {
+fn tile_ctx(
+    tile: usize,
+    tiles_x: usize,
+    cam: &Camera,
+    opts: &RenderOptions,
+    count_alpha: bool,
+) -> TileCtx {
     let (tx, ty) = (tile % tiles_x, tile / tiles_x);
     let (x0, y0) = ((tx * TS) as u32, (ty * TS) as u32);
     TileCtx {
@@ -432,6 +457,7 @@ fn tile_ctx(tile: usize, tiles_x: usize, cam: &Camera, opts: &RenderOptions) -> 
         rows: (cam.height - y0).min(TS as u32) as usize,
         k: opts.topk,
         bg: opts.background,
+        count_alpha,
     }
 }
 

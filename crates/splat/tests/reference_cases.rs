@@ -4,7 +4,7 @@
 
 mod common;
 use common::{rel_l2, Case, CASES};
-use splat::{Gradients, Rasterizer};
+use splat::{Cull, Gradients, Rasterizer, RenderOptions};
 
 /// Max abs error per pixel (over its channels) must be ≤ 1e-4 except for ≤ 0.1% of pixels.
 fn check_pixels(name: &str, what: &str, got: &[f32], want: &[f64], ch: usize) {
@@ -30,6 +30,11 @@ fn run_case(stem: &str) {
     let g = case.gaussians();
     let mut r = Rasterizer::new();
     let out = r.forward(&g, &case.cam, &case.opts).expect("forward");
+    assert_eq!(
+        case.opts.cull,
+        Cull::Exact,
+        "the default culling is the one checked"
+    );
     check_pixels(stem, "image", out.image, &exp.req("image"), 3);
     check_pixels(stem, "alpha", out.alpha, &exp.req("alpha"), 1);
     let radii: Vec<f64> = out
@@ -47,11 +52,17 @@ fn run_case(stem: &str) {
         radii_diff <= radii.len() / 200,
         "{stem}: {radii_diff} radii differ"
     );
+    // gsplat bins every tile of the 3.33σ box: compare its count with that binning.
     let n_isects = exp.scalar("n_isects") as usize;
+    let boxed = RenderOptions {
+        cull: Cull::Box3Sigma,
+        ..case.opts.clone()
+    };
+    let mut rb = Rasterizer::new();
+    let box_isects = rb.forward(&g, &case.cam, &boxed).expect("forward").n_isects;
     assert!(
-        out.n_isects.abs_diff(n_isects) <= n_isects / 200,
-        "{stem}: {} intersections vs {n_isects}",
-        out.n_isects
+        box_isects.abs_diff(n_isects) <= n_isects / 200,
+        "{stem}: {box_isects} intersections vs {n_isects}"
     );
     let mut grads = Gradients::default();
     let (w, aw) = (case.weights.clone(), case.alpha_weights.clone());

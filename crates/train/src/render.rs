@@ -77,6 +77,20 @@ impl Renderer {
         objects.place(model, t, &mut self.deformed);
     }
 
+    /// The deformed geometry at time `t` exactly as [`Renderer::render`] draws it, for
+    /// callers that drive the rasterizer themselves (`examples/cull_probe.rs`).
+    pub fn deformed(
+        &mut self,
+        model: &GaussianModel,
+        field: Option<&mut DeformField>,
+        objects: ObjectsView,
+        cam: &Camera,
+        t: f32,
+    ) -> &Deformed {
+        self.deform(model, field, objects, cam, t);
+        &self.deformed
+    }
+
     /// Renders `H·W·3` RGB at time `t` from `cam`.
     pub fn render(
         &mut self,

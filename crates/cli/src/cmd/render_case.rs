@@ -211,6 +211,9 @@ fn load_case(path: &Path) -> Result<Case> {
             topk: 0,
             eps2d: eps2d as f32,
             near_plane: near_plane as f32,
+            // gsplat's binning, so that `n_isects` compares with gsplat's own (the image and
+            // the gradients are the same with the default culling).
+            cull: splat::Cull::Box3Sigma,
         },
         weights,
         alpha_weights,

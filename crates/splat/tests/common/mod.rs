@@ -114,6 +114,7 @@ impl Case {
             topk: 0,
             eps2d: i.scalar("eps2d") as f32,
             near_plane: i.scalar("near_plane") as f32,
+            ..RenderOptions::default()
         };
         let case = Case {
             name: stem.to_string(),

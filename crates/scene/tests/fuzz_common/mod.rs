@@ -633,16 +633,16 @@ fn edit_toml(b: &mut Vec<u8>, m: &Mutation) {
         return;
     };
     let special = match m {
-        Mutation::Replace(i, Replacement::Float(x)) if !x.is_finite() => Some((i.clone(), *x)),
+        Mutation::Replace(_, Replacement::Float(x)) if !x.is_finite() => Some(*x),
         _ => None,
     };
     edit_tree(&mut json, m);
     let Ok(mut back) = serde_json::from_value::<toml::Value>(json) else {
         return;
     };
-    if let Some((i, x)) = special {
+    if let Some(x) = special {
         // The JSON stand-in (f64::MAX) is at the chosen node: put the non-finite back.
-        set_nonfinite(&mut back, &i, x);
+        set_nonfinite(&mut back, x);
     }
     if let toml::Value::Table(t) = back {
         if let Ok(s) = toml::to_string(&t) {
@@ -651,12 +651,12 @@ fn edit_toml(b: &mut Vec<u8>, m: &Mutation) {
     }
 }
 
-fn set_nonfinite(v: &mut toml::Value, _i: &Index, x: f64) {
+fn set_nonfinite(v: &mut toml::Value, x: f64) {
     // The stand-in is unique enough to find by value.
     match v {
         toml::Value::Float(f) if f.abs() == f64::MAX => *f = x,
-        toml::Value::Array(a) => a.iter_mut().for_each(|e| set_nonfinite(e, _i, x)),
-        toml::Value::Table(t) => t.iter_mut().for_each(|(_, e)| set_nonfinite(e, _i, x)),
+        toml::Value::Array(a) => a.iter_mut().for_each(|e| set_nonfinite(e, x)),
+        toml::Value::Table(t) => t.iter_mut().for_each(|(_, e)| set_nonfinite(e, x)),
         _ => {}
     }
 }

@@ -118,8 +118,15 @@ fn load_frame(
             format!("frame {index}: time is not finite"),
         ));
     }
-    let camera = intrinsics(meta, image.width, image.height, viewmat, opts.downscale);
+    let camera = intrinsics(meta, image.width, image.height, viewmat, opts.downscale)
+        .map_err(|msg| SceneError::invalid(json_path, format!("frame {index}: {msg}")))?;
     let image = image.downscale(opts.downscale);
+    if image.width == 0 || image.height == 0 {
+        return Err(SceneError::invalid(
+            &image_path,
+            format!("smaller than the downscale factor {}", opts.downscale),
+        ));
+    }
     Ok(Frame {
         file_path,
         time,
@@ -210,7 +217,7 @@ fn intrinsics(
     height: u32,
     viewmat: [[f32; 4]; 4],
     downscale: u32,
-) -> splat::Camera {
+) -> Result<splat::Camera, String> {
     let fx = meta.fl_x.unwrap_or_else(|| {
         0.5 * f64::from(width) / (0.5 * meta.camera_angle_x.unwrap_or(1.0)).tan()
     });
@@ -219,15 +226,33 @@ fn intrinsics(
     let cy = meta.cy.unwrap_or(0.5 * f64::from(height));
     // A factor-f box filter maps pixel coordinate u to u/f exactly (edges stay on edges).
     let s = 1.0 / f64::from(downscale.max(1));
-    splat::Camera {
+    let (fx, fy, cx, cy) = (
+        (fx * s) as f32,
+        (fy * s) as f32,
+        (cx * s) as f32,
+        (cy * s) as f32,
+    );
+    // `camera_angle_x` of 0 or π, a zero or huge `fl_x`, `cx` beyond f32: the rasterizer
+    // would divide by these, so they are refused here, where the file can be named.
+    if !(fx.is_finite() && fy.is_finite() && fx > 0.0 && fy > 0.0) {
+        return Err(format!(
+            "focal length fx = {fx}, fy = {fy} (from fl_x/fl_y/camera_angle_x) must be finite and > 0"
+        ));
+    }
+    if !(cx.is_finite() && cy.is_finite()) {
+        return Err(format!(
+            "principal point cx = {cx}, cy = {cy} is not finite"
+        ));
+    }
+    Ok(splat::Camera {
         width: width / downscale.max(1),
         height: height / downscale.max(1),
-        fx: (fx * s) as f32,
-        fy: (fy * s) as f32,
-        cx: (cx * s) as f32,
-        cy: (cy * s) as f32,
+        fx,
+        fy,
+        cx,
+        cy,
         viewmat,
-    }
+    })
 }
 
 #[cfg(test)]

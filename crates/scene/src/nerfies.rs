@@ -116,17 +116,18 @@ fn normalized_times<'a>(
 ) -> Result<HashMap<String, f32>, SceneError> {
     let mut raw = HashMap::new();
     for id in ids {
-        let e = meta
-            .get(id)
-            .ok_or_else(|| SceneError::invalid(path, format!("no entry for id `{id}`")))?;
+        let e = meta.get(id).ok_or_else(|| {
+            SceneError::invalid(path, format!("no entry for id `{id}` of dataset.json"))
+        })?;
         let t = e
             .time_id
             .or(e.warp_id)
             .ok_or_else(|| SceneError::invalid(path, format!("id `{id}` has no `time_id`")))?;
-        if !t.is_finite() {
+        // Time ids count frames: a negative one would normalize to a time below 0.
+        if !(t.is_finite() && t >= 0.0) {
             return Err(SceneError::invalid(
                 path,
-                format!("id `{id}`: time_id is not finite"),
+                format!("id `{id}`: time_id {t} is not a finite number ≥ 0"),
             ));
         }
         raw.insert(id.clone(), t);
@@ -192,6 +193,12 @@ fn load_frame(
         ));
     }
     let image = if prescaled { image } else { image.downscale(n) };
+    if image.width == 0 || image.height == 0 {
+        return Err(SceneError::invalid(
+            &image_path,
+            format!("smaller than the downscale factor {n}"),
+        ));
+    }
     let camera = camera(
         &cam_path,
         &cam,
@@ -237,8 +244,12 @@ fn camera(
         row[..3].copy_from_slice(o);
         row[3] = -(0..3).map(|k| o[k] * pos[k]).sum::<f64>();
     }
-    let viewmat = crate::math::to_f32(&m)
-        .ok_or_else(|| SceneError::invalid(path, "orientation/position not finite"))?;
+    let viewmat = crate::math::to_f32(&m).ok_or_else(|| {
+        SceneError::invalid(
+            path,
+            "orientation/position not finite as f32 (after scene.json's center and scale)",
+        )
+    })?;
     let vals = [
         c.focal_length / n,
         c.focal_length * c.pixel_aspect_ratio / n,
@@ -268,6 +279,7 @@ fn read_points(root: &Path, scene: &SceneJson) -> Result<Option<Vec<[f32; 3]>>, 
         return Ok(None);
     }
     let bytes = std::fs::read(&path).map_err(|e| SceneError::io(&path, e))?;
+    check_npy_preamble(&bytes).map_err(|m| SceneError::invalid(&path, m))?;
     let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| SceneError::io(&path, e))?;
     let shape = npy.shape().to_vec();
     if shape.len() != 2 || shape[1] != 3 {
@@ -283,6 +295,12 @@ fn read_points(root: &Path, scene: &SceneJson) -> Result<Option<Vec<[f32; 3]>>, 
         _ => npy.into_vec::<f64>(),
     }
     .map_err(|e| SceneError::io(&path, e))?;
+    if let Some(i) = flat.iter().position(|v| !v.is_finite()) {
+        return Err(SceneError::invalid(
+            &path,
+            format!("value {i} ({}) is not finite", flat[i]),
+        ));
+    }
     Ok(Some(
         flat.chunks_exact(3)
             .map(|p| {
@@ -294,4 +312,35 @@ fn read_points(root: &Path, scene: &SceneJson) -> Result<Option<Vec<[f32; 3]>>, 
             })
             .collect(),
     ))
+}
+
+/// The `.npy` header length must fit in the file: npyz allocates it before reading, and in
+/// format versions 2 and 3 it is a u32 (found by fuzzing: one flipped version bit made a
+/// 5-point file ask for 630 MiB).
+fn check_npy_preamble(bytes: &[u8]) -> Result<(), String> {
+    let (Some(b"\x93NUMPY"), Some(&major)) = (bytes.get(..6), bytes.get(6)) else {
+        return Err("not a .npy file (no \\x93NUMPY magic)".into());
+    };
+    let (start, len) = match major {
+        1 => (
+            10,
+            bytes
+                .get(8..10)
+                .map(|b| usize::from(u16::from_le_bytes([b[0], b[1]]))),
+        ),
+        2 | 3 => (
+            12,
+            bytes
+                .get(8..12)
+                .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize),
+        ),
+        v => return Err(format!("unsupported .npy format version {v}")),
+    };
+    match len {
+        Some(len) if start + len <= bytes.len() => Ok(()),
+        _ => Err(format!(
+            "its header length runs past the end of the file ({} bytes)",
+            bytes.len()
+        )),
+    }
 }

@@ -154,11 +154,15 @@ fn read_binary(
     idx: &[usize],
 ) -> Result<Vec<f32>, String> {
     let stride: usize = props.iter().map(|p| p.size).sum();
-    if body.len() < stride * count {
+    // Checked: a header may claim any count, and `stride * count` must not wrap around to
+    // a size that the body seems to hold.
+    if stride
+        .checked_mul(count)
+        .is_none_or(|need| body.len() < need)
+    {
         return Err(format!(
-            "body has {} bytes, {count} vertices need {}",
-            body.len(),
-            stride * count
+            "body has {} bytes, {count} vertices of {stride} bytes do not fit",
+            body.len()
         ));
     }
     let offsets: Vec<usize> = props

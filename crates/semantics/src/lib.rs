@@ -2,6 +2,7 @@
 pub mod automask;
 pub mod clip;
 pub mod idmap;
+mod pth;
 pub mod relevance;
 pub mod sam;
 pub mod segment;

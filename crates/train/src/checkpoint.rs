@@ -406,13 +406,27 @@ pub fn load_model(dir: &Path) -> Result<LoadedModel> {
             dir.display()
         );
     }
+    check_count(&sf, model.len(), &dir.join(PLY_NAME))?;
     model.sh_degree = sf.meta("sh_degree")?;
     if model.sh_degree > 3 {
         return Err(sf.err("sh_degree > 3"));
     }
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let mut field = DeformField::new(&cfg.field, &mut rng);
-    field.mlp.params = sf.f32s("field.params", field.mlp.num_params())?;
+    let want = field.mlp.num_params();
+    if let Ok(t) = sf.st.tensor("field.params") {
+        let got: usize = t.shape().iter().product();
+        if got != want {
+            // Either file may be the wrong one: name both.
+            return Err(sf.err(format!(
+                "tensor `field.params` holds {got} values, but the {}×{} field of {} has {want}",
+                cfg.field.depth,
+                cfg.field.width,
+                dir.join(CONFIG_NAME).display()
+            )));
+        }
+    }
+    field.mlp.params = sf.f32s("field.params", want)?;
     let column = read_column(&sf, model.len())?;
     let stored = read_objects(&sf)?;
     check_column(&sf, &column, &stored.objects)?;
@@ -424,6 +438,23 @@ pub fn load_model(dir: &Path) -> Result<LoadedModel> {
         objects: stored.objects,
         column,
     })
+}
+
+/// The state's per-Gaussian rows (`stats.denom`, in every checkpoint) must be as many as
+/// the PLY's Gaussians; a mismatch names both files, since either may be the wrong one.
+fn check_count(sf: &StateFile<'_>, n: usize, ply: &Path) -> Result<()> {
+    let Ok(t) = sf.st.tensor("stats.denom") else {
+        return Ok(());
+    };
+    let rows = t.shape().first().copied().unwrap_or(0);
+    if rows != n || t.shape().len() != 1 {
+        return Err(sf.err(format!(
+            "holds state for {rows} Gaussians (`stats.denom` {:?}) but {} holds {n}",
+            t.shape(),
+            ply.display()
+        )));
+    }
+    Ok(())
 }
 
 /// The per-Gaussian object column (absent in runs from before objects: all background).

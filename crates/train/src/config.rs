@@ -11,6 +11,13 @@ use std::path::Path;
 pub const MIN_DENSIFY_INTERVAL: u32 = 100;
 /// Smallest opacity-reset interval `--iters` rescales to.
 pub const MIN_OPACITY_RESET_INTERVAL: u32 = 1000;
+/// Upper bounds that keep a config's allocations finite (a bad value is refused, not an
+/// abort on a failed allocation): the deformation MLP's parameter count (2^26 = 67M, 256
+/// MiB of f32 before Adam's two moments; the faithful field has 0.6M), the random
+/// initialization's points (3DGS uses 100k) and the children per split Gaussian (3DGS: 2).
+pub const MAX_FIELD_PARAMS: usize = 1 << 26;
+pub const MAX_RANDOM_POINTS: usize = 50_000_000;
+pub const MAX_SPLIT_CHILDREN: usize = 64;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -277,7 +284,7 @@ impl TrainConfig {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
-        cfg.validate()?;
+        cfg.validate().map_err(|e| e.in_config_file(path))?;
         Ok(cfg)
     }
 
@@ -288,9 +295,12 @@ impl TrainConfig {
             Some(p) => Self::from_toml_file(p)?,
             None => Self::default(),
         };
-        match iters {
-            Some(n) => cfg.rescaled(n),
-            None => Ok(cfg),
+        match (iters, file) {
+            // A schedule that rescales to an invalid value came from the file's values.
+            // (`--iters 0` is the command line's fault, not the file's.)
+            (Some(n), Some(p)) if n > 0 => cfg.rescaled(n).map_err(|e| e.in_config_file(p)),
+            (Some(n), _) => cfg.rescaled(n),
+            (None, _) => Ok(cfg),
         }
     }
 
@@ -382,6 +392,12 @@ impl TrainConfig {
         nonzero("iterations", self.iterations as u64)?;
         let i = &self.init;
         pos("init.random_extent", i.random_extent)?;
+        if i.random_points > MAX_RANDOM_POINTS {
+            return Err(TrainError::config(
+                "init.random_points",
+                format!("must be ≤ {MAX_RANDOM_POINTS}, got {}", i.random_points),
+            ));
+        }
         if !(i.opacity > 0.0 && i.opacity < 1.0) {
             return Err(TrainError::config(
                 "init.opacity",
@@ -395,6 +411,24 @@ impl TrainConfig {
             return Err(TrainError::config(
                 "field.pos_freqs/time_freqs",
                 "must be ≤ 30 (2^f overflows f32 precision)",
+            ));
+        }
+        // Checked before anything is allocated: a config (or a checkpoint's config.toml)
+        // asking for a 10^9-wide field would otherwise abort the process in `Mlp::new`.
+        let in_dim = crate::encoding::encoded_dim(3, f.pos_freqs)
+            + crate::encoding::encoded_dim(1, f.time_freqs);
+        // An upper bound of `Mlp::new`'s count: (depth + 1) layers of at most
+        // (in + width + 1) inputs (skip and bias included) × max(width, head) outputs.
+        let params = (f.width.checked_add(in_dim + 1))
+            .and_then(|fan_in| fan_in.checked_mul(f.width.max(crate::field::HEAD)))
+            .and_then(|layer| layer.checked_mul(f.depth.checked_add(1)?));
+        if params.is_none_or(|p| p > MAX_FIELD_PARAMS) {
+            return Err(TrainError::config(
+                "field.depth/width",
+                format!(
+                    "a {}×{} field has over {MAX_FIELD_PARAMS} parameters (the faithful 8×256 has 0.6M)",
+                    f.depth, f.width
+                ),
             ));
         }
         if !(f.visible_margin.is_finite() && f.visible_margin >= 0.0) {
@@ -455,6 +489,12 @@ impl TrainConfig {
             ));
         }
         nonzero("densify.split_children", d.split_children as u64)?;
+        if d.split_children > MAX_SPLIT_CHILDREN {
+            return Err(TrainError::config(
+                "densify.split_children",
+                format!("must be ≤ {MAX_SPLIT_CHILDREN}, got {}", d.split_children),
+            ));
+        }
         if self.sh.max_degree > 3 {
             return Err(TrainError::config(
                 "sh.max_degree",

@@ -8,6 +8,13 @@ use thiserror::Error;
 pub enum TrainError {
     #[error("invalid config value `{field}`: {problem}")]
     Config { field: String, problem: String },
+    /// [`TrainError::Config`] of a value read from a file.
+    #[error("invalid config value `{field}` in {path}: {problem}")]
+    ConfigInFile {
+        path: PathBuf,
+        field: String,
+        problem: String,
+    },
     #[error("cannot parse config {path}: {message}")]
     ConfigParse { path: PathBuf, message: String },
     #[error("I/O error on {path}: {source}")]
@@ -53,6 +60,18 @@ impl TrainError {
         TrainError::Io {
             path: path.into(),
             source,
+        }
+    }
+
+    /// This error, naming `path` when it is about a config value (the value came from it).
+    pub(crate) fn in_config_file(self, path: &std::path::Path) -> Self {
+        match self {
+            TrainError::Config { field, problem } => TrainError::ConfigInFile {
+                path: path.to_path_buf(),
+                field,
+                problem,
+            },
+            other => other,
         }
     }
 

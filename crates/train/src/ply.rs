@@ -126,11 +126,13 @@ pub fn read(path: &Path) -> Result<GaussianModel> {
     };
     let h = parse_header(&bytes, &err)?;
     let stride: usize = h.props.iter().map(|p| p.1).sum();
-    if bytes.len() < h.body + h.n * stride {
+    // Checked: the header's count is untrusted, and a product that wraps around could pass
+    // the size test and send the reads below out of bounds.
+    let need = h.n.checked_mul(stride);
+    if need.is_none_or(|need| bytes.len() - h.body < need) {
         return Err(err(format!(
-            "truncated: {} vertices need {} bytes of data, file has {}",
+            "truncated: {} vertices of {stride} bytes do not fit in the file's {} bytes of data",
             h.n,
-            h.n * stride,
             bytes.len() - h.body
         )));
     }

@@ -117,7 +117,7 @@ fn bad_config_files_name_the_problem() {
     let p = dir.path().join("c.toml");
     std::fs::write(&p, "[lr]\nopacity = -0.5\n").unwrap();
     let e = TrainConfig::from_toml_file(&p).unwrap_err().to_string();
-    assert!(e.contains("lr.opacity"), "{e}");
+    assert!(e.contains("lr.opacity") && e.contains("c.toml"), "{e}");
     std::fs::write(&p, "[densify]\ngrad_treshold = 1e-4\n").unwrap();
     let e = TrainConfig::from_toml_file(&p).unwrap_err().to_string();
     assert!(e.contains("c.toml") && e.contains("grad_treshold"), "{e}");

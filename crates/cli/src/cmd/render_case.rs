@@ -110,15 +110,28 @@ impl Reader {
         }
         let descr = arr.dtype().descr();
         let descr = descr.trim_matches(|c| c == '\'' || c == '"');
+        // A read error (data shorter than the header's shape) names the file and key too.
+        let short = || format!("{file}: key `{key}`: cannot read its data");
         let data: Vec<f64> = match descr {
-            "<f8" => arr.into_vec::<f64>()?,
-            "<f4" => arr.into_vec::<f32>()?.into_iter().map(f64::from).collect(),
+            "<f8" => arr.into_vec::<f64>().with_context(short)?,
+            "<f4" => arr
+                .into_vec::<f32>()
+                .with_context(short)?
+                .into_iter()
+                .map(f64::from)
+                .collect(),
             "<i8" => arr
-                .into_vec::<i64>()?
+                .into_vec::<i64>()
+                .with_context(short)?
                 .into_iter()
                 .map(|v| v as f64)
                 .collect(),
-            "<i4" => arr.into_vec::<i32>()?.into_iter().map(f64::from).collect(),
+            "<i4" => arr
+                .into_vec::<i32>()
+                .with_context(short)?
+                .into_iter()
+                .map(f64::from)
+                .collect(),
             other => bail!("{file}: key `{key}` has dtype {other}, expected float or int"),
         };
         if let Some(bad) = data.iter().position(|v| !v.is_finite()) {

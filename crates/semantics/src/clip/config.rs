@@ -154,21 +154,28 @@ impl ClipConfig {
         if value.get("vision_cfg").is_some() {
             let m: OcModel =
                 serde_json::from_value(value).map_err(|e| err(format!("OpenCLIP config: {e}")))?;
-            Ok(Self::from_open_clip(m))
+            let c = Self::from_open_clip(m).map_err(&err)?;
+            c.validate().map_err(err)?;
+            Ok(c)
         } else if value.get("vision_config").is_some() {
             let m: HfModel = serde_json::from_value(value)
                 .map_err(|e| err(format!("Hugging Face config: {e}")))?;
-            Self::from_hf(m).map_err(err)
+            let c = Self::from_hf(m).map_err(&err)?;
+            c.validate().map_err(err)?;
+            Ok(c)
         } else {
             Err(err("neither an OpenCLIP config (vision_cfg) nor a Hugging Face CLIPConfig (vision_config)".into()))
         }
     }
 
-    fn from_open_clip(m: OcModel) -> Self {
+    fn from_open_clip(m: OcModel) -> Result<Self, String> {
         let v = m.vision_cfg;
         let t = m.text_cfg;
         let mlp = |w: usize, r: f64| (w as f64 * r) as usize; // int(d_model * mlp_ratio)
-        Self {
+        if v.head_width == 0 {
+            return Err("vision_cfg.head_width must be ≥ 1".into());
+        }
+        Ok(Self {
             embed_dim: m.embed_dim,
             vision: VisionConfig {
                 image_size: v.image_size,
@@ -193,7 +200,7 @@ impl ClipConfig {
                     Activation::Gelu
                 }
             }),
-        }
+        })
     }
 
     fn from_hf(m: HfModel) -> Result<Self, String> {
@@ -214,7 +221,9 @@ impl ClipConfig {
                 width: v.hidden_size,
                 layers: v.num_hidden_layers,
                 heads: v.num_attention_heads,
-                mlp_width: v.intermediate_size.unwrap_or(4 * v.hidden_size),
+                mlp_width: v
+                    .intermediate_size
+                    .unwrap_or(v.hidden_size.saturating_mul(4)),
             },
             text: TextConfig {
                 context_length: t.max_position_embeddings.unwrap_or(77),
@@ -222,7 +231,9 @@ impl ClipConfig {
                 width: t.hidden_size,
                 layers: t.num_hidden_layers,
                 heads: t.num_attention_heads,
-                mlp_width: t.intermediate_size.unwrap_or(4 * t.hidden_size),
+                mlp_width: t
+                    .intermediate_size
+                    .unwrap_or(t.hidden_size.saturating_mul(4)),
             },
             activation,
         })
@@ -259,6 +270,47 @@ impl ClipConfig {
             },
             activation: Some(activation),
         }
+    }
+
+    /// Refuses shapes no CLIP has, before any of them sizes an allocation or a product
+    /// (`grid² + 1`, the `context²` causal mask): every size ≥ 1 and within bounds 8–64×
+    /// beyond ViT-bigG's, the image a whole number of patches, the widths divisible by the
+    /// head counts.
+    pub fn validate(&self) -> Result<(), String> {
+        let (v, t) = (&self.vision, &self.text);
+        for (name, value, max) in [
+            ("embed_dim", self.embed_dim, 1 << 16),
+            ("vision image_size", v.image_size, 1 << 13),
+            ("vision patch_size", v.patch_size, 1 << 13),
+            ("vision width", v.width, 1 << 16),
+            ("vision layers", v.layers, 1 << 10),
+            ("vision heads", v.heads, 1 << 10),
+            ("vision mlp_width", v.mlp_width, 1 << 18),
+            ("text context_length", t.context_length, 1 << 13),
+            ("text vocab_size", t.vocab_size, 1 << 22),
+            ("text width", t.width, 1 << 16),
+            ("text layers", t.layers, 1 << 10),
+            ("text heads", t.heads, 1 << 10),
+            ("text mlp_width", t.mlp_width, 1 << 18),
+        ] {
+            if value == 0 || value > max {
+                return Err(format!("{name} = {value} is outside 1..={max}"));
+            }
+        }
+        if !v.image_size.is_multiple_of(v.patch_size) {
+            return Err(format!(
+                "vision image_size {} is not a multiple of patch_size {}",
+                v.image_size, v.patch_size
+            ));
+        }
+        for (name, width, heads) in [("vision", v.width, v.heads), ("text", t.width, t.heads)] {
+            if !width.is_multiple_of(heads) {
+                return Err(format!(
+                    "{name} width {width} is not divisible by {heads} heads"
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// The resolved activation (GELU if nothing decided it; see the module note).

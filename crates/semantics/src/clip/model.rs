@@ -60,11 +60,30 @@ impl ClipModel {
 
     /// Loads `weights` (see [`super::weights::Weights::load`] for the formats).
     pub fn load(weights: &Path, options: &LoadOptions) -> Result<Self, ClipError> {
+        // A candle error while reading or assembling the towers (a dtype that does not
+        // convert, shapes that do not reshape) is about the weights file: say which.
+        Self::load_named(weights, options).map_err(|e| match e {
+            ClipError::Candle(source) => ClipError::ReadWeights {
+                path: weights.to_path_buf(),
+                source,
+            },
+            other => other,
+        })
+    }
+
+    fn load_named(weights: &Path, options: &LoadOptions) -> Result<Self, ClipError> {
         let w = Weights::load(weights)?;
         let config_path = options.config.clone().or_else(|| sibling_config(weights));
         let mut config = match &config_path {
             Some(p) => ClipConfig::from_json_file(p)?,
-            None => w.infer_config()?,
+            None => {
+                let c = w.infer_config()?;
+                c.validate().map_err(|reason| ClipError::Layout {
+                    path: weights.to_path_buf(),
+                    reason: format!("inferred architecture: {reason}"),
+                })?;
+                c
+            }
         };
         let layout_default = match w.layout {
             Layout::HuggingFace => Activation::QuickGelu,

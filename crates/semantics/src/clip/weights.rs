@@ -45,6 +45,7 @@ impl Weights {
                 .into_iter()
                 .collect()
         } else {
+            crate::pth::check(path).map_err(|m| read_err(candle_core::Error::Msg(m)))?;
             candle_core::pickle::read_all(path).map_err(read_err)?
         };
         let mut tensors = HashMap::with_capacity(raw.len());
@@ -133,6 +134,17 @@ impl Weights {
         Ok(t.dims().to_vec())
     }
 
+    /// The shape of `name`, which must have `rank` dimensions (indexing it is then safe).
+    fn dims_n(&self, name: &str, rank: usize) -> Result<Vec<usize>, ClipError> {
+        let d = self.dims(name)?;
+        if d.len() != rank {
+            return Err(self.layout_err(format!(
+                "tensor {name} has shape {d:?}, expected {rank} dimensions"
+            )));
+        }
+        Ok(d)
+    }
+
     fn count_blocks(&self, prefix: &str) -> usize {
         (0..)
             .take_while(|i| {
@@ -145,19 +157,19 @@ impl Weights {
     /// Architecture from tensor shapes; heads assume OpenCLIP's default head width of 64
     /// (true of every OpenAI and OpenCLIP ViT-B/L/H) — a config file overrides it.
     pub fn infer_config(&self) -> Result<ClipConfig, ClipError> {
-        let conv = self.dims("visual.conv1.weight")?;
-        let vpos = self.dims("visual.positional_embedding")?;
-        let proj = self.dims("visual.proj")?;
+        let conv = self.dims_n("visual.conv1.weight", 4)?;
+        let vpos = self.dims_n("visual.positional_embedding", 2)?;
+        let proj = self.dims_n("visual.proj", 2)?;
         let grid = ((vpos[0].saturating_sub(1)) as f64).sqrt().round() as usize;
         let (vw, patch) = (conv[0], conv[2]);
-        let tok = self.dims("token_embedding.weight")?;
-        let tpos = self.dims("positional_embedding")?;
-        let v_mlp = self.dims("visual.transformer.resblocks.0.mlp.c_fc.weight")?[0];
-        let t_mlp = self.dims("transformer.resblocks.0.mlp.c_fc.weight")?[0];
+        let tok = self.dims_n("token_embedding.weight", 2)?;
+        let tpos = self.dims_n("positional_embedding", 2)?;
+        let v_mlp = self.dims_n("visual.transformer.resblocks.0.mlp.c_fc.weight", 2)?[0];
+        let t_mlp = self.dims_n("transformer.resblocks.0.mlp.c_fc.weight", 2)?[0];
         Ok(ClipConfig {
             embed_dim: proj[1],
             vision: VisionConfig {
-                image_size: grid * patch,
+                image_size: grid.saturating_mul(patch),
                 patch_size: patch,
                 width: vw,
                 layers: self.count_blocks("visual.transformer"),

@@ -72,6 +72,7 @@ fn var_builder(path: &Path) -> Result<VarBuilder<'static>, SamError> {
         unsafe { VarBuilder::from_mmaped_safetensors(&[path], DType::F32, &Device::Cpu) }
             .map_err(load_err)
     } else {
+        crate::pth::check(path).map_err(|m| load_err(candle_core::Error::Msg(m)))?;
         VarBuilder::from_pth(path, DType::F32, &Device::Cpu).map_err(load_err)
     }
 }

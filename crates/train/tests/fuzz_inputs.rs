@@ -99,32 +99,48 @@ fn fuzz_checkpoint_file(format: &str, file: &'static str, cases: u32) {
     let mut r = runner(format, cases);
     let t = tally.clone();
     let via = prop_oneof![Just(Via::Model), Just(Via::Trainer)];
-    let result = r.run(&(mutations(kind), via), |(muts, via)| {
-        let bytes = match file {
-            checkpoint::STATE_NAME => apply_safetensors(&original, &muts),
-            _ => apply(&original, &muts, kind),
-        };
-        std::fs::write(&target, bytes).unwrap();
-        let d = dir.clone();
-        let got = match via {
-            Via::Model => check_load(&t, &[file], move || checkpoint::load_model(&d).map(|_| ()))?,
-            Via::Trainer => check_load(&t, &[file], move || {
-                let mut tr = checkpoint::load_trainer(&d, dataset().clone())?;
-                if !tr.state.is_aligned() {
-                    return Err(train::TrainError::Data(
-                        "loaded state is not aligned".into(),
-                    ));
+    let sums = dir.join(train::integrity::CHECKSUMS_NAME);
+    let sums_original = std::fs::read(&sums).unwrap();
+    let result = r.run(
+        &(mutations(kind), via, any::<bool>()),
+        |(muts, via, resign)| {
+            let bytes = match file {
+                checkpoint::STATE_NAME => apply_safetensors(&original, &muts),
+                _ => apply(&original, &muts, kind),
+            };
+            // Half the cases pass the checksums (as if the damage had been written that way),
+            // so the loaders' own checks are fuzzed too, not only the checksum test.
+            if resign {
+                let mut v: serde_json::Value = serde_json::from_slice(&sums_original).unwrap();
+                v["files"][file] = train::integrity::crc_hex(&bytes).into();
+                v["tensors"].as_object_mut().unwrap().remove(file);
+                std::fs::write(&sums, v.to_string()).unwrap();
+            }
+            std::fs::write(&target, bytes).unwrap();
+            let d = dir.clone();
+            let got = match via {
+                Via::Model => {
+                    check_load(&t, &[file], move || checkpoint::load_model(&d).map(|_| ()))?
                 }
-                // A loaded checkpoint must train; a typed error (say, divergence of
-                // mutated weights) is fine, a panic is not.
-                let _ = tr.step();
-                Ok(())
-            })?,
-        };
-        std::fs::write(&target, &original).unwrap();
-        let _ = got;
-        Ok(())
-    });
+                Via::Trainer => check_load(&t, &[file], move || {
+                    let mut tr = checkpoint::load_trainer(&d, dataset().clone())?;
+                    if !tr.state.is_aligned() {
+                        return Err(train::TrainError::Data(
+                            "loaded state is not aligned".into(),
+                        ));
+                    }
+                    // A loaded checkpoint must train; a typed error (say, divergence of
+                    // mutated weights) is fine, a panic is not.
+                    let _ = tr.step();
+                    Ok(())
+                })?,
+            };
+            std::fs::write(&target, &original).unwrap();
+            std::fs::write(&sums, &sums_original).unwrap();
+            let _ = got;
+            Ok(())
+        },
+    );
     finish(format, result, &tally);
 }
 

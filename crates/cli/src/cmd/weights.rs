@@ -40,7 +40,7 @@ pub fn run(a: Args) -> Result<()> {
             let dir = dir.unwrap_or_else(weights::dir);
             fetch::fetch(&list, &dir, |l| println!("{l}"))?;
             if Some(dir.as_os_str()) != std::env::var_os("SEMDYNREG_WEIGHTS").as_deref()
-                && dir != PathBuf::from("weights")
+                && dir != std::path::Path::new("weights")
             {
                 println!(
                     "commands read them with: export SEMDYNREG_WEIGHTS={}",

@@ -64,13 +64,15 @@ impl Adam {
             .zip(self.v.par_chunks_mut(chunk))
             .map(|(((p, g), m), v)| {
                 if row == 1 {
-                    update(p, g, m, v, |_| lrs[0], &k)
+                    // The rate as a plain value: looked up as `lrs[0]` per element, the
+                    // bounds check kept this loop scalar (2.5–3× slower on 20M floats).
+                    update(p, g, m, v, std::iter::repeat(lrs[0]), &k)
                 } else {
                     let rows = p.chunks_exact_mut(row).zip(g.chunks_exact(row));
                     let moments = m.chunks_exact_mut(row).zip(v.chunks_exact_mut(row));
                     let mut ok = true;
                     for ((p, g), (m, v)) in rows.zip(moments) {
-                        ok &= update(p, g, m, v, |j| lrs[j], &k);
+                        ok &= update(p, g, m, v, lrs.iter().copied(), &k);
                     }
                     ok
                 }
@@ -123,31 +125,33 @@ fn flush_subnormal(x: f32) -> f32 {
     }
 }
 
-/// Adam on one run of elements; `lr(j)` is the rate of element `j` of the run. Returns
-/// whether every updated parameter is finite.
+/// Adam on one run of elements; `lr` yields the rate of each element in turn. Returns
+/// whether every updated parameter is finite. Written as one zip so that the loop has no
+/// bounds checks and vectorizes.
 #[inline(always)]
 fn update(
     p: &mut [f32],
     g: &[f32],
     m: &mut [f32],
     v: &mut [f32],
-    lr: impl Fn(usize) -> f32,
+    lr: impl Iterator<Item = f32>,
     k: &StepConsts,
 ) -> bool {
     let (b1, b2) = (k.hp.beta1, k.hp.beta2);
-    let mut ok = true;
-    for j in 0..p.len() {
-        let gj = g[j];
-        let mj = flush_subnormal(b1 * m[j] + (1.0 - b1) * gj);
-        let vj = flush_subnormal(b2 * v[j] + (1.0 - b2) * gj * gj);
-        m[j] = mj;
-        v[j] = vj;
+    // An integer OR of "exponent all ones" (Inf or NaN), which vectorizes.
+    let mut nonfinite = 0u32;
+    let moments = m.iter_mut().zip(v.iter_mut());
+    for (((p, &gj), (m, v)), lr) in p.iter_mut().zip(g).zip(moments).zip(lr) {
+        let mj = flush_subnormal(b1 * *m + (1.0 - b1) * gj);
+        let vj = flush_subnormal(b2 * *v + (1.0 - b2) * gj * gj);
+        *m = mj;
+        *v = vj;
         let denom = vj.sqrt() * k.inv_sqrt_bc2 + k.hp.eps;
-        let pj = p[j] - lr(j) * k.inv_bc1 * mj / denom;
-        p[j] = pj;
-        ok &= pj.is_finite();
+        let pj = *p - lr * k.inv_bc1 * mj / denom;
+        *p = pj;
+        nonfinite |= ((pj.to_bits() & 0x7f80_0000) == 0x7f80_0000) as u32;
     }
-    ok
+    nonfinite == 0
 }
 
 /// 3DGS `get_expon_lr_func` without delay: log-linear from `init` to `end` over `max_steps`.

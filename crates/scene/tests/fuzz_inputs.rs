@@ -16,6 +16,7 @@
 //! FUZZ_CASES=100000 FUZZ_SEED=7 cargo test -p scene --test fuzz_inputs -- --ignored
 //! ```
 
+#[macro_use]
 #[path = "fuzz_common/mod.rs"]
 mod fuzz_common;
 
@@ -467,25 +468,6 @@ fn png_mask(cases: u32) {
             ))
         }
     });
-}
-
-/// One test per format with its CI case count, and `fuzz_long_run` (ignored) running them
-/// all with `FUZZ_CASES` (default 20× the CI count) each.
-macro_rules! formats {
-    ($($test:ident: $ci:expr => $body:expr;)*) => {
-        $(
-            #[test]
-            fn $test() {
-                ($body)(fuzz_common::cases($ci))
-            }
-        )*
-
-        #[test]
-        #[ignore = "long run: cargo test -p scene --test fuzz_inputs -- --ignored (FUZZ_CASES=N per format)"]
-        fn fuzz_long_run() {
-            $( ($body)(fuzz_common::long_cases($ci)); )*
-        }
-    };
 }
 
 formats! {

@@ -20,6 +20,7 @@
 //! cargo test -p semantics --test fuzz_inputs -- --ignored --nocapture
 //! ```
 
+#[macro_use]
 #[path = "../../scene/tests/fuzz_common/mod.rs"]
 mod fuzz_common;
 
@@ -398,25 +399,6 @@ fn clip_safetensors(format: &str, seed: &str, cases: u32) {
         Ok(())
     });
     finish(format, result, &tally);
-}
-
-/// One test per format with its CI case count, and `fuzz_long_run` (ignored) running them
-/// all with `FUZZ_CASES` (default 20× the CI count) each.
-macro_rules! formats {
-    ($($test:ident: $ci:expr => $body:expr;)*) => {
-        $(
-            #[test]
-            fn $test() {
-                ($body)(fuzz_common::cases($ci))
-            }
-        )*
-
-        #[test]
-        #[ignore = "long run: cargo test -p semantics --test fuzz_inputs -- --ignored (FUZZ_CASES=N per format)"]
-        fn fuzz_long_run() {
-            $( ($body)(fuzz_common::long_cases($ci)); )*
-        }
-    };
 }
 
 formats! {

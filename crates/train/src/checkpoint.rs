@@ -153,14 +153,15 @@ pub fn save(tr: &Trainer, run: &Path) -> Result<PathBuf> {
 
 /// The files of a checkpoint of `tr`, written into the folder `dir`; `checksums.json` last.
 fn write_files(tr: &Trainer, dir: &Path) -> Result<()> {
-    crate::ply::write(&dir.join(PLY_NAME), &tr.state.model)?;
+    let ply = crate::ply::to_bytes(&tr.state.model);
+    atomic_write(&dir.join(PLY_NAME), &ply)?;
     let state = state_bytes(tr)?;
     atomic_write(&dir.join(STATE_NAME), &state)?;
     let config = tr.cfg.to_toml();
     atomic_write(&dir.join(CONFIG_NAME), config.as_bytes())?;
     crate::integrity::write(
         dir,
-        (PLY_NAME, &tr.state.model),
+        (PLY_NAME, &tr.state.model, &ply),
         &[(STATE_NAME, &state), (CONFIG_NAME, config.as_bytes())],
     )
 }

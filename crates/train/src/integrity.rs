@@ -137,15 +137,18 @@ pub fn verify(dir: &Path) -> Result<bool> {
     Ok(true)
 }
 
-/// Writes `checksums.json` into `dir` for the files just written there: `state` and
-/// `config` from their bytes in memory, the PLY read back, and each one's tensors.
-pub fn write(dir: &Path, ply: (&str, &GaussianModel), files: &[(&str, &[u8])]) -> Result<()> {
+/// Writes `checksums.json` into `dir` for the files just written there, from their bytes
+/// in memory: each file's CRC and its tensors' (the PLY's groups from `ply.1`).
+pub fn write(
+    dir: &Path,
+    ply: (&str, &GaussianModel, &[u8]),
+    files: &[(&str, &[u8])],
+) -> Result<()> {
     let mut sums = Checksums {
         format: FORMAT.into(),
         ..Default::default()
     };
-    let ply_bytes = crate::io::read(&dir.join(ply.0))?;
-    sums.files.insert(ply.0.into(), crc_hex(&ply_bytes));
+    sums.files.insert(ply.0.into(), crc_hex(ply.2));
     sums.tensors.insert(ply.0.into(), model_groups(ply.1));
     for (name, bytes) in files {
         sums.files.insert(name.to_string(), crc_hex(bytes));

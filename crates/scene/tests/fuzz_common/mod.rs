@@ -780,3 +780,23 @@ pub fn npy(descr: &str, shape: &[u64], data: &[u8]) -> Vec<u8> {
     out.extend(data);
     out
 }
+
+/// One test per format with its CI case count, and `fuzz_long_run` (ignored) running them
+/// all with `FUZZ_CASES` (default 20× the CI count) each: `cargo test -p CRATE --test FILE
+/// -- --ignored`. Shared by every fuzz test file (`#[macro_use] mod fuzz_common`).
+macro_rules! formats {
+    ($($test:ident: $ci:expr => $body:expr;)*) => {
+        $(
+            #[test]
+            fn $test() {
+                ($body)(fuzz_common::cases($ci))
+            }
+        )*
+
+        #[test]
+        #[ignore = "long run: cargo test -p CRATE --test FILE -- --ignored (FUZZ_CASES=N per format)"]
+        fn fuzz_long_run() {
+            $( ($body)(fuzz_common::long_cases($ci)); )*
+        }
+    };
+}

@@ -3,6 +3,7 @@
 
 mod cmd;
 mod report;
+mod sweep;
 mod weights;
 
 use clap::{Parser, Subcommand};
@@ -28,6 +29,7 @@ enum Command {
     Metrics(cmd::metrics::Args),
     Render(cmd::render::Args),
     Segment(cmd::segment::Args),
+    Sweep(cmd::sweep::Args),
     Synth(cmd::synth::Args),
     Train(cmd::train::Args),
     Weights(cmd::weights::Args),
@@ -52,6 +54,7 @@ fn main() -> anyhow::Result<()> {
         Command::Metrics(a) => cmd::metrics::run(a),
         Command::Render(a) => cmd::render::run(a),
         Command::Segment(a) => cmd::segment::run(a),
+        Command::Sweep(a) => cmd::sweep::run(a),
         Command::Synth(a) => cmd::synth::run(a),
         Command::Train(a) => cmd::train::run(a),
         Command::Weights(a) => cmd::weights::run(a),

@@ -4,17 +4,14 @@
 //! crops at t = 0…5 s), written to `DIR/results.json`, `DIR/report.md` and
 //! `DIR/report.html`, with the paper-style tables printed.
 
-use crate::report::consistency::{run_consistency, VehicleMetrics};
-use crate::report::evaluate::{evaluate_run, EvalSet, RenderDir, RunEval};
 use crate::report::figure::{self, FigureMethod};
-use crate::report::methods::{Method, METHODS};
-use crate::report::results::{MethodResults, Protocol, Results};
+use crate::report::methods::METHODS;
+use crate::report::results::Results;
 use crate::report::runs::{prepare_run, RunPlan, TrainSettings};
-use crate::report::scorer::{load_lpips, MetricsScorer};
+use crate::report::scoring::{method_results, MethodRun, SceneEval, Scoring};
 use crate::report::trainlog::TrainLog;
-use crate::report::{crops::CropPolicy, inputs, text_tables, write_plots, write_report, Report};
+use crate::report::{inputs, text_tables, write_plots, write_report, Report};
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -63,14 +60,6 @@ pub struct Args {
     /// with pip, `semdynreg weights fetch`); also `SEMDYNREG_OFFLINE=1`.
     #[arg(long)]
     pub offline: bool,
-}
-
-/// One compared method: where its renders are and, when trained here, its run folder
-/// (for the consistency metric).
-struct MethodRun {
-    method: &'static Method,
-    renders: PathBuf,
-    run_dir: Option<PathBuf>,
 }
 
 /// The compared methods in display order, with what their runs left (logs, config).
@@ -166,7 +155,7 @@ fn train_all(args: &Args) -> Result<Runs> {
 }
 
 /// The resolved config of a run's latest checkpoint, as JSON.
-fn run_config(run: &Path) -> Result<serde_json::Value> {
+pub(crate) fn run_config(run: &Path) -> Result<serde_json::Value> {
     let ckpt = train::checkpoint::latest(run)?;
     let cfg = train::checkpoint::read_config(&ckpt)
         .with_context(|| format!("reading {}", ckpt.display()))?;
@@ -174,7 +163,7 @@ fn run_config(run: &Path) -> Result<serde_json::Value> {
 }
 
 /// This process's command line, shell-quoted where needed.
-fn command_line() -> String {
+pub(crate) fn command_line() -> String {
     std::env::args()
         .map(|a| {
             if a.is_empty() || a.contains(|c: char| c.is_whitespace() || "'\"$`\\".contains(c)) {
@@ -187,56 +176,24 @@ fn command_line() -> String {
         .join(" ")
 }
 
-fn progress_bar(label: &str, total: usize) -> ProgressBar {
-    let bar = ProgressBar::new(total as u64);
-    let style = ProgressStyle::with_template("{msg:>17} [{bar:30}] {pos}/{len} frames {elapsed}")
-        .expect("static template")
-        .progress_chars("=> ");
-    bar.set_style(style);
-    bar.set_message(label.to_string());
-    bar
-}
-
-fn score(set: &EvalSet, label: &str, dir: &Path, scorer: &mut MetricsScorer) -> Result<RunEval> {
-    let bar = progress_bar(label, set.frames.len());
-    let eval = evaluate_run(set, &RenderDir(dir.to_path_buf()), scorer, &|done, _| {
-        bar.set_position(done as u64)
-    })
-    .with_context(|| format!("evaluating the {label} renders in {}", dir.display()))?;
-    bar.finish();
-    Ok(eval)
-}
-
-/// The scene's evaluation split, loaded as the runs were trained.
-fn load_dataset(args: &Args) -> Result<scene::Dataset> {
-    let opts = scene::LoadOptions {
-        background: if args.white_background {
-            [1.0; 3]
-        } else {
-            [0.0; 3]
-        },
-        downscale: args.downscale,
-    };
-    scene::load_dataset(&args.scene, &opts)
-        .with_context(|| format!("loading scene {}", args.scene.display()))
-}
-
 fn evaluate_and_report(args: &Args, mut runs: Runs) -> Result<()> {
-    let ds = load_dataset(args)?;
-    let policy = CropPolicy::default();
-    let set = inputs::eval_set(&ds, args.duration_s, policy)?;
     crate::weights::ensure(
         "compare",
         &[&crate::weights::catalog::LPIPS_ALEX],
         args.offline,
     );
-    let (lpips, lpips_text) = load_lpips()?;
-    let mut scorer = MetricsScorer::new(lpips);
+    let mut scoring = Scoring::load(&SceneEval {
+        scene: args.scene.clone(),
+        downscale: args.downscale,
+        white_background: args.white_background,
+        duration_s: args.duration_s,
+    })?;
     let mut evals = Vec::with_capacity(runs.methods.len());
     for m in &runs.methods {
-        evals.push(score(&set, m.method.display, &m.renders, &mut scorer)?);
+        evals.push(scoring.score(m.method.display, &m.renders)?);
     }
-    let (id_maps, id_source) = inputs::figure_id_maps(&ds, &set)?;
+    let set = &scoring.set;
+    let (id_maps, id_source) = inputs::figure_id_maps(&scoring.ds, set)?;
     let figure_methods: Vec<FigureMethod> = runs
         .methods
         .iter()
@@ -247,16 +204,16 @@ fn evaluate_and_report(args: &Args, mut runs: Runs) -> Result<()> {
             eval,
         })
         .collect();
-    let figure = figure::write_figure(&args.out, &set, &figure_methods, &id_maps)?;
+    let figure = figure::write_figure(&args.out, set, &figure_methods, &id_maps)?;
     let mut notes = std::mem::take(&mut runs.notes);
-    let by_method = method_results(&runs, evals, &set, &mut notes);
+    let by_method = method_results(&runs.methods, evals, set, &mut notes);
     let results = Results {
         methods: runs.methods.iter().map(|m| m.method.into()).collect(),
         by_method,
         scene: args.scene.display().to_string(),
         commands: runs.commands,
         config: runs.config,
-        protocol: protocol(args, &ds, &set, policy, lpips_text),
+        protocol: scoring.protocol(args.duration_s),
         notes,
     };
     let plots = write_plots(
@@ -276,106 +233,4 @@ fn evaluate_and_report(args: &Args, mut runs: Runs) -> Result<()> {
     println!("results: {}", paths.results_json.display());
     println!("report:  {}", paths.html.display());
     Ok(())
-}
-
-/// Each method's scores with its consistency metric (when its run was trained here),
-/// keyed by method; what could not be measured goes to `notes`.
-fn method_results(
-    runs: &Runs,
-    evals: Vec<RunEval>,
-    set: &EvalSet,
-    notes: &mut Vec<String>,
-) -> BTreeMap<String, MethodResults> {
-    if set.moving_object().is_none() {
-        notes.push(
-            "no moving object in objects.json (or no objects.json): crop tables are empty".into(),
-        );
-    }
-    if runs.methods.iter().any(|m| m.run_dir.is_none()) {
-        notes.push(
-            "deformation_consistency_rms is null: it needs the trained models, not only their renders".into(),
-        );
-    }
-    let mut by_method = BTreeMap::new();
-    for (m, eval) in runs.methods.iter().zip(evals) {
-        let mut res = eval.results;
-        if let Some(run) = &m.run_dir {
-            add_consistency(&mut res, run, set, notes);
-        }
-        by_method.insert(m.method.key.to_string(), res);
-    }
-    by_method
-}
-
-/// How the numbers were produced (results.json's `protocol`).
-fn protocol(
-    args: &Args,
-    ds: &scene::Dataset,
-    set: &EvalSet,
-    policy: CropPolicy,
-    lpips: String,
-) -> Protocol {
-    Protocol {
-        split: if ds.test.is_empty() { "val" } else { "test" }.into(),
-        duration_s: args.duration_s,
-        t_seconds: set.t_seconds.clone(),
-        crop_policy: policy.describe(),
-        ssim_variant: MetricsScorer::ssim_description().into(),
-        lpips,
-        moving_object: set
-            .moving_object()
-            .map(|o| o.name.clone())
-            .unwrap_or_default(),
-        moving_objects: set.moving_objects().map(|o| o.name.clone()).collect(),
-    }
-}
-
-/// Fills the consistency fields of `res` from the trained run, or says in `notes` why not.
-fn add_consistency(res: &mut MethodResults, run: &Path, set: &EvalSet, notes: &mut Vec<String>) {
-    let Some(VehicleMetrics {
-        consistency: r,
-        rigidity,
-    }) = consistency(run, notes)
-    else {
-        return;
-    };
-    res.deformation_consistency_rms = Some(r.rms);
-    res.deformation_consistency_per_object = r
-        .per_object
-        .iter()
-        .map(|x| (object_name(set, x.object), x.rms))
-        .collect();
-    res.deformation_follow_per_object = r
-        .per_object
-        .iter()
-        .filter_map(|x| Some((object_name(set, x.object), x.follow()?)))
-        .collect();
-    res.rigidity_rms = Some(rigidity.rms);
-    res.rigidity_rms_per_object = rigidity
-        .per_object
-        .iter()
-        .map(|x| (object_name(set, x.object), x.rms))
-        .collect();
-}
-
-/// The name `objects.json` gives object `id` (its number when it has none).
-fn object_name(set: &EvalSet, id: u8) -> String {
-    set.objects
-        .iter()
-        .find(|o| o.id == id)
-        .map_or_else(|| id.to_string(), |o| o.name.clone())
-}
-
-/// The run's consistency and rigidity reports, or `None` with the reason added to `notes`.
-fn consistency(run: &Path, notes: &mut Vec<String>) -> Option<VehicleMetrics> {
-    match run_consistency(run, None) {
-        Ok(r) => Some(r),
-        Err(e) => {
-            notes.push(format!(
-                "deformation consistency of {} not computed: {e:#}",
-                run.display()
-            ));
-            None
-        }
-    }
 }

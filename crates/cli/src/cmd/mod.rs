@@ -10,6 +10,7 @@ pub mod render;
 pub mod render_case;
 pub mod segment;
 pub mod select;
+pub mod sweep;
 pub mod synth;
 pub mod train;
 pub mod weights;

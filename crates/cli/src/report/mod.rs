@@ -17,6 +17,7 @@ pub mod plots;
 pub mod results;
 pub mod runs;
 pub mod scorer;
+pub mod scoring;
 pub mod table;
 pub mod trainlog;
 

@@ -1,7 +1,9 @@
 //! Segment Anything (SAM / MobileSAM) for automatic mask generation on the CPU.
 //!
-//! The image encoders are candle-transformers' ViT-B/L/H and our TinyViT (`tiny_vit.rs`, candle's
-//! with the exact erf GELU, vectorized and multi-threaded); the prompt
+//! The image encoders are our TinyViT for MobileSAM (`tiny_vit.rs`: candle's, with the exact erf
+//! GELU, vectorized and multi-threaded) and, with the cargo feature `sam-vit`,
+//! candle-transformers' ViT-B/L/H (left out by default: that crate alone is ~225 s of CPU in
+//! every optimized build, docs/performance.md "Build time"); the prompt
 //! encoder and mask decoder are re-implemented here on plain f32 buffers (see `decoder.rs` for
 //! why), loading the same checkpoint keys as the official `segment_anything` code.
 
@@ -10,6 +12,7 @@ pub mod elementwise;
 pub mod kernels;
 pub mod layers;
 pub mod model;
+pub mod norm;
 pub mod prompt;
 pub mod resize;
 pub mod tiny_vit;

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use candle_core::{DType, Device, Module, Tensor};
 use candle_nn::VarBuilder;
+#[cfg(feature = "sam-vit")]
 use candle_transformers::models::segment_anything::image_encoder::ImageEncoderViT;
 
 use super::decoder::{ImageContext, MaskDecoder};
@@ -25,6 +26,7 @@ pub enum Backbone {
 
 enum Encoder {
     Tiny(Box<TinyViT>),
+    #[cfg(feature = "sam-vit")]
     Vit(Box<ImageEncoderViT>),
 }
 
@@ -91,31 +93,37 @@ fn detect_backbone(vb: &VarBuilder) -> candle_core::Result<Backbone> {
 }
 
 fn build_encoder(backbone: Backbone, vb: VarBuilder) -> candle_core::Result<Encoder> {
-    // (embed_dim, depth, heads, global attention blocks) from segment_anything/build_sam.py.
-    let vit = |dim, depth, heads, global: &[usize]| {
-        ImageEncoderViT::new(
-            IMAGE_SIZE,
-            16,
-            3,
-            dim,
-            depth,
-            heads,
-            EMBED_DIM,
-            true,
-            true,
-            true,
-            14,
-            global,
-            vb.clone(),
-        )
-        .map(|e| Encoder::Vit(Box::new(e)))
-    };
     match backbone {
         Backbone::MobileSam => Ok(Encoder::Tiny(Box::new(tiny_vit_5m(vb)?))),
-        Backbone::VitB => vit(768, 12, 12, &[2, 5, 8, 11]),
-        Backbone::VitL => vit(1024, 24, 16, &[5, 11, 17, 23]),
-        Backbone::VitH => vit(1280, 32, 16, &[7, 15, 23, 31]),
+        vit => build_vit(vit, vb),
     }
+}
+
+/// SAM's ViT-B/L/H image encoder (candle-transformers' port).
+#[cfg(feature = "sam-vit")]
+fn build_vit(backbone: Backbone, vb: VarBuilder) -> candle_core::Result<Encoder> {
+    // (embed_dim, depth, heads, global attention blocks) from segment_anything/build_sam.py.
+    let (dim, depth, heads, global): (usize, usize, usize, &[usize]) = match backbone {
+        Backbone::VitB => (768, 12, 12, &[2, 5, 8, 11]),
+        Backbone::VitL => (1024, 24, 16, &[5, 11, 17, 23]),
+        Backbone::VitH => (1280, 32, 16, &[7, 15, 23, 31]),
+        Backbone::MobileSam => candle_core::bail!("MobileSAM has no ViT encoder"),
+    };
+    let enc = ImageEncoderViT::new(
+        IMAGE_SIZE, 16, 3, dim, depth, heads, EMBED_DIM, true, true, true, 14, global, vb,
+    )?;
+    Ok(Encoder::Vit(Box::new(enc)))
+}
+
+/// Without the `sam-vit` feature the ViT encoders are not compiled in (they need
+/// candle-transformers, the slowest crate of the build): say how to get them.
+#[cfg(not(feature = "sam-vit"))]
+fn build_vit(backbone: Backbone, _vb: VarBuilder) -> candle_core::Result<Encoder> {
+    candle_core::bail!(
+        "this is a SAM {backbone:?} checkpoint, and this build of semdynreg reads MobileSAM only: \
+         rebuild with `cargo build --release --features sam-vit` for the ViT-B/L/H encoders, or \
+         use mobile_sam.pt (`semdynreg weights fetch mobile-sam`)"
+    )
 }
 
 impl Sam {
@@ -166,6 +174,7 @@ impl Sam {
         let t = Tensor::from_vec(input, (1, 3, IMAGE_SIZE, IMAGE_SIZE), &Device::Cpu)?;
         let out = match &self.encoder {
             Encoder::Tiny(e) => e.forward(&t)?,
+            #[cfg(feature = "sam-vit")]
             Encoder::Vit(e) => e.forward(&t)?,
         };
         let data = out.flatten_all()?.to_vec1::<f32>()?;

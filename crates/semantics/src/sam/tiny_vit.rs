@@ -1,4 +1,4 @@
-//! MobileSAM's TinyViT-5M image encoder: candle-transformers 0.11's
+//! MobileSAM's TinyViT-5M image encoder: adapted from candle-transformers 0.11's
 //! `segment_anything/tiny_vit.rs` (MIT OR Apache-2.0, itself adapted from
 //! <https://github.com/ChaoningZhang/MobileSAM/blob/master/mobile_sam/modeling/tiny_vit_sam.py>)
 //! with one change: every GELU is the exact erf form that the official code's `nn.GELU` computes
@@ -8,11 +8,16 @@
 //! profile). Tracing spans dropped.
 
 use candle_core::{CpuStorage, CustomOp1, IndexOp, Layout, Result, Shape, Tensor, D};
-use candle_nn::{Conv2dConfig, Module, VarBuilder};
-use candle_transformers::models::segment_anything::{linear, LayerNorm2d, Linear};
+use candle_nn::{Conv2dConfig, Linear, Module, VarBuilder};
 use rayon::prelude::*;
 
 use super::elementwise::gelu_inplace;
+use super::norm::LayerNorm2d;
+
+/// `nn.Linear(in_, out, bias)` under `vb`.
+fn linear(vb: VarBuilder, in_: usize, out: usize, bias: bool) -> Result<Linear> {
+    candle_nn::linear_b(in_, out, bias, vb)
+}
 
 /// Exact GELU over a contiguous f32 tensor (see the module comment).
 struct GeluErf;

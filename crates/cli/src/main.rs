@@ -3,6 +3,7 @@
 
 mod cmd;
 mod report;
+mod view;
 mod weights;
 
 use clap::{Parser, Subcommand};
@@ -30,6 +31,7 @@ enum Command {
     Segment(cmd::segment::Args),
     Synth(cmd::synth::Args),
     Train(cmd::train::Args),
+    View(cmd::view::Args),
     Weights(cmd::weights::Args),
     RenderCase(cmd::render_case::Args),
 }
@@ -54,6 +56,7 @@ fn main() -> anyhow::Result<()> {
         Command::Segment(a) => cmd::segment::run(a),
         Command::Synth(a) => cmd::synth::run(a),
         Command::Train(a) => cmd::train::run(a),
+        Command::View(a) => cmd::view::run(a),
         Command::Weights(a) => cmd::weights::run(a),
         Command::RenderCase(a) => cmd::render_case::run(a),
     }

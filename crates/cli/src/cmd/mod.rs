@@ -12,4 +12,5 @@ pub mod segment;
 pub mod select;
 pub mod synth;
 pub mod train;
+pub mod view;
 pub mod weights;

@@ -111,12 +111,16 @@ pub fn recolour(bytes: &mut [u8], colours: &[[u8; 3]]) {
     }
 }
 
+/// A frame's cache key: its rounded time ([`time_key`]) and colouring.
+pub type Key = (u32, Colouring);
+
 /// Cached frames, evicted least recently used first once they pass a byte budget.
 pub struct Cache {
     budget: usize,
     total: usize,
     clock: u64,
-    entries: HashMap<(u32, Colouring), (Arc<Vec<u8>>, u64)>,
+    /// Each frame's bytes and the clock of its last use.
+    entries: HashMap<Key, (Arc<Vec<u8>>, u64)>,
 }
 
 impl Cache {
@@ -129,7 +133,7 @@ impl Cache {
         }
     }
 
-    pub fn get(&mut self, key: (u32, Colouring)) -> Option<Arc<Vec<u8>>> {
+    pub fn get(&mut self, key: Key) -> Option<Arc<Vec<u8>>> {
         self.clock += 1;
         let clock = self.clock;
         self.entries.get_mut(&key).map(|(b, used)| {
@@ -140,7 +144,7 @@ impl Cache {
 
     /// Keeps `bytes`, evicting older entries past the budget (the newest always stays,
     /// so a frame larger than the budget is still served).
-    pub fn insert(&mut self, key: (u32, Colouring), bytes: Arc<Vec<u8>>) {
+    pub fn insert(&mut self, key: Key, bytes: Arc<Vec<u8>>) {
         self.clock += 1;
         self.total += bytes.len();
         if let Some((old, _)) = self.entries.insert(key, (bytes, self.clock)) {

@@ -176,16 +176,16 @@ pub fn orbit(cams: &[splat::Camera], fallback: [f32; 3]) -> Orbit {
     for c in cams {
         let r = rotation(c);
         let (down, fwd, centre) = (r[1], r[2], c.center());
-        for k in 0..3 {
-            up[k] -= down[k];
+        for (u, d) in up.iter_mut().zip(down) {
+            *u -= d;
         }
         // Σ (I − d dᵀ) p = Σ (I − d dᵀ) c over the axes c + s·d.
-        for i in 0..3 {
-            for j in 0..3 {
+        for (i, (row, bi)) in a.iter_mut().zip(b.iter_mut()).enumerate() {
+            for (j, aij) in row.iter_mut().enumerate() {
                 let identity = if i == j { 1.0 } else { 0.0 };
                 let p = identity - f64::from(fwd[i] * fwd[j]);
-                a[i][j] += p;
-                b[i] += p * f64::from(centre[j]);
+                *aij += p;
+                *bi += p * f64::from(centre[j]);
             }
         }
     }
@@ -226,8 +226,8 @@ fn solve3(a: &[[f64; 3]; 3], b: &[f64; 3]) -> Option<[f32; 3]> {
     let mut x = [0.0f32; 3];
     for (k, xk) in x.iter_mut().enumerate() {
         let mut m = *a;
-        for r in 0..3 {
-            m[r][k] = b[r];
+        for (row, br) in m.iter_mut().zip(b) {
+            row[k] = *br;
         }
         *xk = (det(&m) / d) as f32;
     }
@@ -274,9 +274,9 @@ mod tests {
         let t: [f32; 3] =
             std::array::from_fn(|i| -(0..3).map(|j| r[i][j] * centre[j]).sum::<f32>());
         let mut viewmat = [[0.0; 4]; 4];
-        for i in 0..3 {
-            viewmat[i][..3].copy_from_slice(&r[i]);
-            viewmat[i][3] = t[i];
+        for ((row, ri), ti) in viewmat.iter_mut().zip(r).zip(t) {
+            row[..3].copy_from_slice(&ri);
+            row[3] = ti;
         }
         viewmat[3][3] = 1.0;
         splat::Camera {
@@ -326,9 +326,9 @@ mod tests {
                 1.0 - 2.0 * (x * x + y * y),
             ],
         ];
-        for i in 0..3 {
-            for j in 0..3 {
-                assert!((back[i][j] - m[i][j]).abs() < 1e-5, "{back:?} vs {m:?}");
+        for (bi, mi) in back.iter().zip(&m) {
+            for (x, y) in bi.iter().zip(mi) {
+                assert!((x - y).abs() < 1e-5, "{back:?} vs {m:?}");
             }
         }
     }

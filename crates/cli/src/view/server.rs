@@ -173,9 +173,8 @@ fn query_value<'a>(query: &'a str, key: &str) -> Option<&'a str> {
     query
         .split('&')
         .filter_map(|kv| kv.split_once('='))
-        .filter(|(k, _)| *k == key)
+        .rfind(|(k, _)| *k == key)
         .map(|(_, v)| v)
-        .last()
 }
 
 fn splat(v: &Viewer, query: &str) -> Result<Frame, RequestError> {

@@ -4,6 +4,7 @@
 mod cmd;
 mod report;
 mod sweep;
+mod view;
 mod weights;
 
 use clap::{Parser, Subcommand};
@@ -32,6 +33,7 @@ enum Command {
     Sweep(cmd::sweep::Args),
     Synth(cmd::synth::Args),
     Train(cmd::train::Args),
+    View(cmd::view::Args),
     Weights(cmd::weights::Args),
     RenderCase(cmd::render_case::Args),
 }
@@ -57,6 +59,7 @@ fn main() -> anyhow::Result<()> {
         Command::Sweep(a) => cmd::sweep::run(a),
         Command::Synth(a) => cmd::synth::run(a),
         Command::Train(a) => cmd::train::run(a),
+        Command::View(a) => cmd::view::run(a),
         Command::Weights(a) => cmd::weights::run(a),
         Command::RenderCase(a) => cmd::render_case::run(a),
     }

@@ -13,4 +13,5 @@ pub mod select;
 pub mod sweep;
 pub mod synth;
 pub mod train;
+pub mod view;
 pub mod weights;

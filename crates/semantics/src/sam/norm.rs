@@ -67,7 +67,13 @@ mod tests {
             .unwrap()
             .reshape((1, 3, 1, 2))
             .unwrap();
-        let y: Vec<f32> = ln.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+        let y: Vec<f32> = ln
+            .forward(&x)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
         let z0 = [-1.0f32, 0.0, 1.0].map(|v| v * (1.5f32).sqrt());
         let z1 = [-1.0f32, -1.0, 2.0].map(|v| v * 2.0 / 8.0f32.sqrt());
         let (w, b) = ([2.0f32, 1.0, 0.5], [1.0f32, 0.0, -1.0]);

@@ -308,24 +308,8 @@ mod tests {
         let c = looking_at_origin([1.0, 2.0, 3.0]);
         let m = transpose(&rotation(&c));
         let [x, y, z, w] = quaternion_xyzw(&m);
-        // The matrix gsplat.js builds from [x, y, z, w] (Matrix3.RotationFromQuaternion).
-        let back = [
-            [
-                1.0 - 2.0 * (y * y + z * z),
-                2.0 * (x * y - z * w),
-                2.0 * (x * z + y * w),
-            ],
-            [
-                2.0 * (x * y + z * w),
-                1.0 - 2.0 * (x * x + z * z),
-                2.0 * (y * z - x * w),
-            ],
-            [
-                2.0 * (x * z - y * w),
-                2.0 * (y * z + x * w),
-                1.0 - 2.0 * (x * x + y * y),
-            ],
-        ];
+        // gsplat.js's Matrix3.RotationFromQuaternion is the standard formula, as ours.
+        let back = train::quat::to_matrix([w, x, y, z]);
         for (bi, mi) in back.iter().zip(&m) {
             for (x, y) in bi.iter().zip(mi) {
                 assert!((x - y).abs() < 1e-5, "{back:?} vs {m:?}");

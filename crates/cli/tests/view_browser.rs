@@ -14,8 +14,9 @@
 //! timings; with SEMDYNREG_VIEW_SCREENSHOT=FILE.png it keeps the side-by-side screenshot
 //! (docs/img/view_side_by_side.png came from there).
 
-use headless_chrome::protocol::cdp::Page::CaptureScreenshotFormatOption;
-use headless_chrome::{Browser, LaunchOptions, Tab};
+mod cdp;
+
+use cdp::Browser;
 use serde_json::Value;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
@@ -176,40 +177,13 @@ fn chromium() -> Option<PathBuf> {
     found
 }
 
-fn launch(chrome: PathBuf, profile: &Path) -> Browser {
-    let flags = [
-        "--use-angle=swiftshader",
-        "--enable-unsafe-swiftshader",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        "--no-first-run",
-    ];
-    let opts = LaunchOptions {
-        headless: true,
-        sandbox: false,
-        // Keeps headless_chrome from adding --disable-gpu: WebGL runs on SwiftShader.
-        enable_gpu: true,
-        window_size: Some((1280, 720)),
-        path: Some(chrome),
-        user_data_dir: Some(profile.to_path_buf()),
-        args: flags.iter().map(std::ffi::OsStr::new).collect(),
-        idle_browser_timeout: Duration::from_secs(300),
-        ..LaunchOptions::default()
-    };
-    Browser::new(opts).expect("launch Chromium")
-}
-
-fn page_state(tab: &Tab) -> Value {
-    let v = tab
-        .evaluate("JSON.stringify(window.__semdynreg || null)", false)
-        .expect("evaluate")
-        .value;
-    serde_json::from_str(v.as_ref().and_then(Value::as_str).unwrap_or("null")).unwrap()
+fn page_state(tab: &mut Browser) -> Value {
+    let v = tab.eval("JSON.stringify(window.__semdynreg || null)");
+    serde_json::from_str(v.as_str().unwrap_or("null")).unwrap()
 }
 
 /// Waits until the page has drawn time `t` in every pane; returns its state.
-fn wait_drawn(tab: &Tab, t: f64) -> Value {
+fn wait_drawn(tab: &mut Browser, t: f64) -> Value {
     let start = Instant::now();
     loop {
         let st = page_state(tab);
@@ -228,20 +202,18 @@ fn wait_drawn(tab: &Tab, t: f64) -> Value {
     }
 }
 
-fn screenshot(tab: &Tab) -> (Vec<u8>, image::RgbImage) {
-    let png = tab
-        .capture_screenshot(CaptureScreenshotFormatOption::Png, None, None, true)
-        .expect("screenshot");
+fn screenshot(tab: &mut Browser) -> (Vec<u8>, image::RgbImage) {
+    let png = tab.screenshot();
     let img = image::load_from_memory(&png).unwrap().to_rgb8();
     (png, img)
 }
 
 /// The panes' rectangles on the page (x, y, w, h in CSS pixels = screenshot pixels).
-fn pane_rects(tab: &Tab) -> Vec<[u32; 4]> {
+fn pane_rects(tab: &mut Browser) -> Vec<[u32; 4]> {
     let js = "JSON.stringify([...document.querySelectorAll('.pane')].map(p => { \
               const r = p.getBoundingClientRect(); \
               return [r.x, r.y, r.width, r.height].map(Math.round); }))";
-    let v = tab.evaluate(js, false).unwrap().value.unwrap();
+    let v = tab.eval(js);
     serde_json::from_str(v.as_str().unwrap()).unwrap()
 }
 
@@ -282,12 +254,12 @@ fn mean_diff(a: &image::RgbImage, b: &image::RgbImage) -> f64 {
     sum as f64 / a.as_raw().len().max(1) as f64
 }
 
-fn set_slider(tab: &Tab, end: &str) {
+fn set_slider(tab: &mut Browser, end: &str) {
     let js = format!(
         "(() => {{ const s = document.getElementById('time'); s.value = {end}; \
          s.dispatchEvent(new Event('input')); return Number(s.value); }})()"
     );
-    tab.evaluate(&js, false).unwrap();
+    tab.eval(&js);
 }
 
 fn background(meta: &Value) -> [u8; 3] {
@@ -302,21 +274,20 @@ fn check_in_browser(chrome: PathBuf, runs: [&Path; 2], objects_pane: bool, tmp: 
     assert_eq!(status, 200, "{meta}");
     let meta: Value = serde_json::from_str(&meta).unwrap();
     let bg = background(&meta);
-    let browser = launch(chrome, &tmp.join("profile"));
-    let tab = browser.new_tab().unwrap();
-    tab.set_default_timeout(Duration::from_secs(90));
+    let mut browser = Browser::launch(&chrome, &tmp.join("profile"), Duration::from_secs(90));
+    let tab = &mut browser;
 
     let loaded = Instant::now();
-    tab.navigate_to(&format!("{}?t=0", server.url)).unwrap();
-    let st = wait_drawn(&tab, 0.0);
+    tab.navigate(&format!("{}?t=0", server.url));
+    let st = wait_drawn(tab, 0.0);
     println!(
         "first frame: {:.0} ms from navigation start ({:.0} ms as the test saw it)",
         st["firstFrameMs"].as_f64().unwrap(),
         loaded.elapsed().as_secs_f64() * 1e3
     );
-    let rects = pane_rects(&tab);
+    let rects = pane_rects(tab);
     assert_eq!(rects.len(), 2, "two panes side by side");
-    let (png, first) = screenshot(&tab);
+    let (png, first) = screenshot(tab);
     std::fs::write(tmp.join("view_t0.png"), &png).unwrap();
     for (k, r) in rects.iter().enumerate() {
         let f = drawn_fraction(&crop(&first, *r), bg);
@@ -325,8 +296,8 @@ fn check_in_browser(chrome: PathBuf, runs: [&Path; 2], objects_pane: bool, tmp: 
     }
 
     // The slider to its end: the panes redraw, the address keeps the time.
-    set_slider(&tab, "s.max");
-    let st = wait_drawn(&tab, 1.0);
+    set_slider(tab, "s.max");
+    let st = wait_drawn(tab, 1.0);
     println!(
         "new time step drawn {:.0} ms after the slider moved, {:.0} ms of it fetching \
          (server: {} ms per frame made)",
@@ -334,7 +305,7 @@ fn check_in_browser(chrome: PathBuf, runs: [&Path; 2], objects_pane: bool, tmp: 
         st["lastFetchMs"].as_f64().unwrap(),
         st["serverMillis"]
     );
-    let (png, last) = screenshot(&tab);
+    let (png, last) = screenshot(tab);
     if let Ok(keep) = std::env::var("SEMDYNREG_VIEW_SCREENSHOT") {
         std::fs::write(&keep, &png).unwrap();
     }
@@ -347,16 +318,12 @@ fn check_in_browser(chrome: PathBuf, runs: [&Path; 2], objects_pane: bool, tmp: 
         changes.iter().any(|c| *c > 0.5),
         "moving the time slider changed no pane: {changes:?}"
     );
-    let search = tab
-        .evaluate("location.search", false)
-        .unwrap()
-        .value
-        .unwrap();
+    let search = tab.eval("location.search");
     assert!(search.as_str().unwrap().contains("t=1.0000"), "{search}");
 
     // Back to the same time: cached, so at once; it must look as before.
-    set_slider(&tab, "0");
-    let st = wait_drawn(&tab, 0.0);
+    set_slider(tab, "0");
+    let st = wait_drawn(tab, 0.0);
     println!(
         "cached step drawn in {:.0} ms ({:.0} ms fetching)",
         st["lastStepMs"].as_f64().unwrap(),
@@ -364,11 +331,10 @@ fn check_in_browser(chrome: PathBuf, runs: [&Path; 2], objects_pane: bool, tmp: 
     );
 
     if objects_pane {
-        tab.evaluate("document.getElementById('objects').click()", false)
-            .unwrap();
+        tab.eval("document.getElementById('objects').click()");
         std::thread::sleep(Duration::from_millis(100));
-        wait_drawn(&tab, 0.0);
-        let (_, coloured) = screenshot(&tab);
+        wait_drawn(tab, 0.0);
+        let (_, coloured) = screenshot(tab);
         let d = mean_diff(&crop(&first, rects[1]), &crop(&coloured, rects[1]));
         assert!(d > 0.5, "colouring by object changed nothing ({d})");
         let d0 = mean_diff(&crop(&first, rects[0]), &crop(&coloured, rects[0]));
@@ -376,10 +342,9 @@ fn check_in_browser(chrome: PathBuf, runs: [&Path; 2], objects_pane: bool, tmp: 
     }
 
     // The same checks must fail on a page that draws nothing.
-    tab.navigate_to(&format!("{}?t=0&blank=1", server.url))
-        .unwrap();
-    wait_drawn(&tab, 0.0);
-    let (_, empty) = screenshot(&tab);
+    tab.navigate(&format!("{}?t=0&blank=1", server.url));
+    wait_drawn(tab, 0.0);
+    let (_, empty) = screenshot(tab);
     for r in &rects {
         assert!(
             !looks_drawn(&crop(&empty, *r), bg),

@@ -6,3 +6,4 @@ mod pth;
 pub mod relevance;
 pub mod sam;
 pub mod segment;
+pub mod track;

@@ -16,6 +16,7 @@ use crate::clip::{ClipError, ClipModel};
 use crate::idmap::{color_of, BACKGROUND};
 use crate::relevance::{object_ids, DictionaryEmbeddings, RelevanceError};
 use crate::sam::{Sam, SamError};
+use crate::track::scene::{TrackSpec, TrackSummary};
 
 /// Canonical phrases of the relevance score (LERF).
 pub const CANONICAL: [&str; 4] = crate::relevance::CANONICAL_PHRASES;
@@ -45,6 +46,10 @@ pub struct SegmentOptions {
     pub clip: Option<PathBuf>,
     pub tau: f32,
     pub generator: GenConfigKey,
+    /// `segment --track`: objects chosen once and tracked (`track/`), instead of masks and
+    /// labels per frame. Absent from the record otherwise, so older caches stay valid.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub track: Option<TrackSpec>,
 }
 
 /// The generator config in a comparable, serializable form.
@@ -87,6 +92,8 @@ pub struct FrameReport {
 pub struct SegmentReport {
     pub cached: bool,
     pub frames: Vec<FrameReport>,
+    /// Tracking's record (fresh `--track` runs only).
+    pub track: Option<TrackSummary>,
 }
 
 #[derive(Serialize)]
@@ -114,7 +121,7 @@ fn file_len(p: Option<&Path>) -> Option<u64> {
     p.and_then(|p| std::fs::metadata(p).ok()).map(|m| m.len())
 }
 
-fn record_json(opts: &SegmentOptions, frames: &[FrameReport]) -> serde_json::Value {
+pub(crate) fn record_json(opts: &SegmentOptions, frames: &[FrameReport]) -> serde_json::Value {
     let clip = opts
         .clip
         .as_deref()
@@ -131,11 +138,11 @@ fn record_json(opts: &SegmentOptions, frames: &[FrameReport]) -> serde_json::Val
 }
 
 /// The cache is valid when `semantics.json` was written with the same options and model
-/// files and every frame's ID map exists.
-fn cached_report(
+/// files and the ID map of every frame in `file_paths` exists.
+pub(crate) fn cached_report(
     root: &Path,
     opts: &SegmentOptions,
-    frames: &[scene::Frame],
+    file_paths: &[String],
 ) -> Option<SegmentReport> {
     let text = std::fs::read_to_string(record_path(root)).ok()?;
     let old: serde_json::Value = serde_json::from_str(&text).ok()?;
@@ -150,9 +157,9 @@ fn cached_report(
             return None;
         }
     }
-    if !frames
+    if !file_paths
         .iter()
-        .all(|f| scene::semantics_path(root, &f.file_path).is_file())
+        .all(|f| scene::semantics_path(root, f).is_file())
     {
         return None;
     }
@@ -170,6 +177,7 @@ fn cached_report(
     Some(SegmentReport {
         cached: true,
         frames: reports,
+        track: None,
     })
 }
 
@@ -352,6 +360,9 @@ pub fn segment_scene(
     force: bool,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<SegmentReport, SegmentError> {
+    if let Some(spec) = &opts.track {
+        return crate::track::scene::track_scene(root, opts, spec, gen, force, progress);
+    }
     if opts.dictionary.is_empty()
         && opts.labels == LabelSource::Clip
         && opts.masks == MaskSource::Sam
@@ -366,7 +377,8 @@ pub fn segment_scene(
         )));
     }
     if !force {
-        if let Some(r) = cached_report(root, opts, &ds.train) {
+        let names: Vec<String> = ds.train.iter().map(|f| f.file_path.clone()).collect();
+        if let Some(r) = cached_report(root, opts, &names) {
             tracing::info!(
                 "semantics cache in {} is up to date",
                 record_path(root).display()
@@ -404,5 +416,6 @@ pub fn segment_scene(
     Ok(SegmentReport {
         cached: false,
         frames,
+        track: None,
     })
 }

@@ -209,3 +209,110 @@ fn decoder_matches_candle_port() {
         assert!(rel < 1e-3, "decoder differs from the candle port: {rel}");
     }
 }
+
+/// The prompts the tracker sends (a box; a box with positive and negative points; several
+/// points without a box) with SAM's single output, against the official PyTorch predictor
+/// (`scripts/make_sam_prompt_fixture.py`, `multimask_output=False`). Same tolerances as the
+/// point prompts above: IoU ±1e-4, low-res logits relative RMS ≤ 1e-4, full-size masks (here
+/// through [`Predictor`], the path the tracker uses) agreeing on ≥ 99.95 % of pixels.
+#[test]
+fn box_and_multipoint_prompts_match_official_pytorch() {
+    use semantics::sam::{Outputs, Predictor, Prompt};
+    let Some(ckpt) = mobile_sam_path() else {
+        return;
+    };
+    let fixture =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sam/mobilesam_prompts.npz");
+    let mut npz = npyz::npz::NpzArchive::open(&fixture).unwrap();
+    let coords = npz_f32(&mut npz, "point_coords");
+    let labels: Vec<i32> = npz
+        .by_name("point_labels")
+        .unwrap()
+        .unwrap()
+        .into_vec()
+        .unwrap();
+    let boxes = npz_f32(&mut npz, "boxes");
+    let iou = npz_f32(&mut npz, "iou");
+    let low = npz_f32(&mut npz, "low_res");
+    let masks = npz_u8(&mut npz, "masks");
+    let sam = Sam::load(&ckpt).unwrap();
+    let img = synthetic_image();
+    let emb = sam.embed(&img, H, W).unwrap();
+    let ctx = sam.prepare(&emb);
+    let pred = Predictor::from_embedding(&sam, emb.clone());
+    let mut sc = Scratch::default();
+    for p in 0..iou.len() {
+        let points: Vec<(f32, f32, bool)> = (0..3)
+            .filter(|&k| labels[p * 3 + k] != -10)
+            .map(|k| {
+                (
+                    coords[p * 6 + 2 * k],
+                    coords[p * 6 + 2 * k + 1],
+                    labels[p * 3 + k] == 1,
+                )
+            })
+            .collect();
+        let b = &boxes[p * 4..p * 4 + 4];
+        let prompt = Prompt {
+            points,
+            bbox: (b[0] >= 0.0).then(|| [b[0], b[1], b[2], b[3]]),
+        };
+        // Low-res logits straight from the decoder, on the resized frame's coordinates.
+        let map = |x: f32, y: f32| Sam::to_input_frame(&emb, x, y);
+        let input = Prompt {
+            points: prompt
+                .points
+                .iter()
+                .map(|&(x, y, l)| (map(x, y).0, map(x, y).1, l))
+                .collect(),
+            bbox: prompt.bbox.map(|[a, b, c, d]| {
+                let ((a, b), (c, d)) = (map(a, b), map(c, d));
+                [a, b, c, d]
+            }),
+        };
+        let out = sam.decoder.decode_prompt(
+            &ctx,
+            &sam.prompt.tokens(&input),
+            Outputs::Single,
+            (GRID, GRID),
+            f32::NEG_INFINITY,
+            &mut sc,
+        );
+        assert_eq!(out.iou_pred.len(), 1);
+        assert!(
+            (out.iou_pred[0] - iou[p]).abs() < 1e-4,
+            "prompt {p}: iou {} vs official {}",
+            out.iou_pred[0],
+            iou[p]
+        );
+        let logits = out.logits.unwrap();
+        let (mut e2, mut r2) = (0.0f64, 0.0f64);
+        for y in 0..96 {
+            for x in 0..128 {
+                let g = logits[2 * y * out.cols + 2 * x];
+                let w = low[(p * 96 + y) * 128 + x];
+                e2 += f64::from((g - w) * (g - w));
+                r2 += f64::from(w * w);
+            }
+        }
+        let rel = (e2 / r2).sqrt();
+        let full = pred.predict(&prompt, Outputs::Single, &mut sc);
+        assert_eq!(full.len(), 1);
+        let want_m = &masks[p * H * W..(p + 1) * H * W];
+        let agree = full[0]
+            .logits
+            .iter()
+            .zip(want_m)
+            .filter(|(g, &w)| (**g > 0.0) == (w == 1))
+            .count() as f64
+            / (H * W) as f64;
+        eprintln!(
+            "prompt {p} ({prompt:?}): iou {:.4} (official {:.4}), low-res rel RMS {rel:.2e}, \
+             masks agree on {agree:.4}",
+            out.iou_pred[0], iou[p]
+        );
+        assert!(rel < 1e-4, "prompt {p}: low-res logits rel error {rel}");
+        assert!(agree >= 0.9995, "prompt {p}: masks agree on {agree}");
+        assert!((full[0].pred_iou - out.iou_pred[0]).abs() < 1e-6);
+    }
+}

@@ -23,6 +23,7 @@ fn options(sam: std::path::PathBuf, masks: MaskSource, gen: &MaskGenConfig) -> S
         clip: None,
         tau: 0.5,
         generator: GenConfigKey::of(gen),
+        track: None,
     }
 }
 

@@ -63,6 +63,7 @@ fn clip_labels_run_end_to_end_and_cache() {
         clip: Some(clip_weights(&models)),
         tau: 0.5,
         generator: GenConfigKey::of(&gen),
+        track: None,
     };
 
     let mut calls = 0;
@@ -114,6 +115,7 @@ fn clip_labels_without_weights_name_the_missing_file() {
         clip: Some(missing.clone()),
         tau: 0.5,
         generator: GenConfigKey::of(&gen),
+        track: None,
     };
     let err = segment_scene(&root, &opts, &gen, false, &mut |_, _| {})
         .expect_err("missing CLIP weights must fail")

@@ -26,8 +26,8 @@ pub fn load(dataset: &Dataset) -> Result<Vec<Vec<u8>>> {
 }
 
 /// A name per object ID: `objects.json`'s names when the scene has one (toycars), else the
-/// dictionary prompt the segmentation labelled ID i with (`semantics/semantics.json`),
-/// else none (callers say `object-<id>`).
+/// tracked objects' names (`segment --track`) or the dictionary prompt the segmentation
+/// labelled ID i with (`semantics/semantics.json`), else none (callers say `object-<id>`).
 pub fn names(dataset: &Dataset) -> Vec<(u8, String)> {
     let objects = dataset.root.join("objects.json");
     if let Ok(f) = scene::objects::ObjectsFile::load(&objects) {
@@ -40,6 +40,14 @@ pub fn names(dataset: &Dataset) -> Vec<(u8, String)> {
     let Ok(v) = serde_json::from_str::<serde_json::Value>(&text) else {
         return Vec::new();
     };
+    // Tracking records its objects' names (automatic ones included) under `track`.
+    if let Some(objects) = v["track"]["objects"].as_array() {
+        return objects
+            .iter()
+            .enumerate()
+            .filter_map(|(i, o)| Some((u8::try_from(i).ok()?, slug(o["name"].as_str()?))))
+            .collect();
+    }
     let dict = v["options"]["dictionary"]
         .as_array()
         .cloned()

@@ -4,8 +4,8 @@
 //! SemDynReg, rigid objects), print the paper-style tables and the path of `report.html`.
 
 use crate::report::runs::run_self;
-use anyhow::{bail, Result};
-use std::path::PathBuf;
+use anyhow::{bail, Context, Result};
+use std::path::{Path, PathBuf};
 
 /// Small toycars scene1, three trainings (baseline, the paper's SemDynReg forked from it,
 /// rigid objects from scratch), evaluation and report in one command.
@@ -36,11 +36,11 @@ pub struct Args {
     /// OUT/scene is generated; an existing OUT/scene is reused as it is.
     #[arg(long, default_value_t = 1.0)]
     pub drive: f32,
-    /// Object-ID maps: `gt` (the scene's ground-truth instance masks: the default, because
-    /// every training frame must be segmented — SAM's automatic grid takes ~11 s per 480×360
-    /// frame on 2 cores — and no package ships CLIP weights), `sam` (MobileSAM masks
-    /// labelled by ground truth), or `sam-clip` (MobileSAM masks labelled by CLIP; needs
-    /// --clip).
+    /// Object-ID maps: `gt` (the scene's ground-truth instance masks, the default), `sam`
+    /// (`segment --track`: MobileSAM tracks each vehicle from one click, taken from the
+    /// ground truth of the first frame showing it; no other ground truth), or `sam-clip`
+    /// (the paper's per-frame MobileSAM masks labelled by CLIP; needs --clip, and no package
+    /// ships CLIP weights).
     #[arg(long, value_enum, default_value = "gt")]
     pub id_maps: IdMaps,
     /// CLIP weights (safetensors) for `--id-maps sam-clip`.
@@ -66,6 +66,34 @@ fn s(v: impl ToString) -> String {
     v.to_string()
 }
 
+/// One click per object of `objects.json` for `segment --track`: the pixel deepest inside its
+/// ground-truth mask on the first frame in time order that shows it (`NAME@x,y@FRAME`). The
+/// demo's only use of ground truth with `--id-maps sam`, standing in for a user's click.
+fn first_clicks(scene: &Path) -> Result<Vec<String>> {
+    let objects = scene::objects::ObjectsFile::load(&scene.join("objects.json"))
+        .with_context(|| format!("reading {}", scene.join("objects.json").display()))?;
+    let ds = scene::load_dataset(scene, &scene::LoadOptions::default())?;
+    let mut frames: Vec<&scene::Frame> = ds.all_frames().collect();
+    frames.sort_by(|a, b| a.time.total_cmp(&b.time));
+    let mut clicks = Vec::new();
+    for o in &objects.objects {
+        let found = frames.iter().enumerate().find_map(|(i, f)| {
+            let m = scene::load_mask(&ds.gt_mask_path(f)).ok()?;
+            let (w, h) = (m.width as usize, m.height as usize);
+            let r =
+                semantics::track::Region::new(w, h, m.data.iter().map(|&v| v == o.id).collect());
+            let &(x, y) = r.interior_points(1, 1).first()?;
+            Some(format!("{}@{x:.1},{y:.1}@{i}", o.name))
+        });
+        clicks.push(
+            found.with_context(|| {
+                format!("object {} ({}) is in no ground-truth mask", o.id, o.name)
+            })?,
+        );
+    }
+    Ok(clicks)
+}
+
 /// Builds `SCENE/semantics/` and returns a sentence saying which maps were used.
 fn id_maps(scene: &str, a: &Args) -> Result<String> {
     let mut cmd = vec![
@@ -82,8 +110,15 @@ fn id_maps(scene: &str, a: &Args) -> Result<String> {
             "ground-truth masks as object-ID maps (SAM: --id-maps sam; SAM + CLIP: --id-maps sam-clip --clip PATH)".to_string()
         }
         IdMaps::Sam => {
-            cmd.extend([s("--labels"), s("gt")]);
-            format!("SAM ({}) masks labelled by ground truth", sam.display())
+            cmd.push(s("--track"));
+            for p in first_clicks(Path::new(scene))? {
+                cmd.extend([s("--prompt"), p]);
+            }
+            format!(
+                "MobileSAM ({}) tracking each vehicle from one click (taken from the ground truth \
+                 of the first frame showing it, the only ground truth used)",
+                sam.display()
+            )
         }
         IdMaps::SamClip => {
             let Some(clip) = &a.clip else {

@@ -2,11 +2,18 @@
 //! [--clip PATH] [--labels clip|gt] [--masks sam|gt]`: object-ID maps for every training frame
 //! (`SCENE/semantics/<file_path>.png`, 255 = background), colour previews and
 //! `SCENE/semantics/semantics.json`; reuses them when the inputs have not changed.
+//!
+//! `semdynreg segment SCENE --track [--prompt NAME@x,y[@FRAME]]… [--box NAME@x0,y0,x1,y1[@FRAME]]…`:
+//! objects chosen once and tracked through every frame of every split with MobileSAM
+//! (`semantics::track`); without prompts, the automatic mask generator picks them on the
+//! first frame.
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use semantics::automask::{MaskGenConfig, Sampling};
 use semantics::segment::{segment_scene, GenConfigKey, LabelSource, MaskSource, SegmentOptions};
+use semantics::track::scene::{TrackSpec, TrackSummary};
+use semantics::track::{AutoSeeds, Seed, TrackConfig};
 use std::path::PathBuf;
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -21,8 +28,13 @@ pub enum Masks {
     Gt,
 }
 
-/// Object-ID maps of a scene's training frames (SAM masks + CLIP labels), for `train --reg`.
+/// Object-ID maps of a scene's frames for `train --reg` / `--objects`: SAM masks labelled per
+/// frame (CLIP or ground truth), or, with --track, objects chosen once and tracked.
 #[derive(clap::Args, Debug)]
+#[command(after_help = "Examples:\n  \
+    semdynreg segment SCENE --track --prompt 'white SUV@120,80' --prompt 'green SUV@300,200'\n  \
+    semdynreg segment SCENE --track --box 'car@40,60,140,130@train/r_010'\n  \
+    semdynreg segment SCENE --track            # objects found automatically on the first frame")]
 pub struct Args {
     /// Scene folder (D-NeRF layout; ground-truth masks in SCENE/masks for `gt` modes).
     pub scene: PathBuf,
@@ -68,6 +80,24 @@ pub struct Args {
     /// Masks with fewer pixels after the non-overlapping assignment are dropped.
     #[arg(long, default_value_t = 16)]
     pub min_mask_area: usize,
+    /// Choose objects once and track them through every frame (all splits, in time order)
+    /// with MobileSAM prompts from the previous frame's mask, instead of segmenting and
+    /// labelling each training frame on its own. Objects are numbered in the order given:
+    /// every --prompt, then every --box; none given: the automatic mask generator's
+    /// object-like masks on the first frame (named by CLIP with --clip, else object-1, …).
+    #[arg(long)]
+    pub track: bool,
+    /// With --track: an object and a click on it, `NAME@x,y` in pixels of the first frame in
+    /// time order, or `NAME@x,y@FRAME` on another (FRAME: an index in time order or a file
+    /// path such as train/r_010). Repeatable.
+    #[arg(long = "prompt", value_name = "NAME@x,y[@FRAME]")]
+    pub prompts: Vec<String>,
+    /// With --track: an object and a box around it, `NAME@x0,y0,x1,y1[@FRAME]`. Repeatable.
+    #[arg(long = "box", value_name = "NAME@x0,y0,x1,y1[@FRAME]")]
+    pub boxes: Vec<String>,
+    /// With --track and no prompts: at most this many automatic objects.
+    #[arg(long, default_value_t = 8)]
+    pub max_objects: usize,
     /// Recompute even when the cache matches.
     #[arg(long)]
     pub force: bool,
@@ -107,13 +137,18 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
     let gen = generator(&a);
-    let opts = SegmentOptions {
-        dictionary: a
+    let track = track_spec(&a)?;
+    let dictionary = match &track {
+        Some(t) if !t.seeds.is_empty() => t.seeds.iter().map(|s| s.name.clone()).collect(),
+        _ => a
             .dict
             .split(',')
             .map(|s| s.trim().to_string())
             .filter(|s| !s.is_empty())
             .collect(),
+    };
+    let opts = SegmentOptions {
+        dictionary,
         masks: match a.masks {
             Masks::Sam => MaskSource::Sam,
             Masks::Gt => MaskSource::Gt,
@@ -129,6 +164,7 @@ pub fn run(a: Args) -> Result<()> {
         clip: a.clip.clone(),
         tau: a.tau,
         generator: GenConfigKey::of(&gen),
+        track,
     };
     let bar = ProgressBar::new(0);
     bar.set_style(
@@ -143,13 +179,120 @@ pub fn run(a: Args) -> Result<()> {
     bar.finish_and_clear();
     let masks: usize = report.frames.iter().map(|f| f.masks).sum();
     let secs: f64 = report.frames.iter().map(|f| f.seconds).sum();
+    if let Some(t) = &report.track {
+        print_track(t, secs / report.frames.len().max(1) as f64);
+    }
     println!(
-        "{} frames{}: {} masks, {:.1} s → {}",
+        "{} frames{}: {} {}, {:.1} s → {}",
         report.frames.len(),
         if report.cached { " (cached)" } else { "" },
         masks,
+        if opts.track.is_some() {
+            "object masks"
+        } else {
+            "masks"
+        },
         secs,
         a.scene.join("semantics").display()
     );
     Ok(())
+}
+
+/// The tracking request, or `None` without --track; prompts without --track are refused.
+fn track_spec(a: &Args) -> Result<Option<TrackSpec>> {
+    if !a.track {
+        if !a.prompts.is_empty() || !a.boxes.is_empty() {
+            bail!("--prompt and --box choose objects to track: add --track");
+        }
+        return Ok(None);
+    }
+    if a.masks == Masks::Gt {
+        bail!("--track makes its own masks with MobileSAM: drop --masks gt");
+    }
+    let mut seeds = Vec::new();
+    for p in &a.prompts {
+        seeds.push(Seed::parse(p, false).context("--prompt")?);
+    }
+    for b in &a.boxes {
+        seeds.push(Seed::parse(b, true).context("--box")?);
+    }
+    if a.max_objects == 0 {
+        bail!("--max-objects must be at least 1");
+    }
+    Ok(Some(TrackSpec {
+        seeds,
+        auto: AutoSeeds {
+            max_objects: a.max_objects,
+            ..AutoSeeds::default()
+        },
+        config: TrackConfig::default(),
+    }))
+}
+
+/// Per object: its seed, the frames where it was lost, and its IoU against ground truth.
+fn print_track(t: &TrackSummary, secs_per_frame: f64) {
+    println!(
+        "tracked {} objects, {secs_per_frame:.2} s per frame:",
+        t.objects.len()
+    );
+    for (k, o) in t.objects.iter().enumerate() {
+        let lost: Vec<&str> = o
+            .lost_frames
+            .iter()
+            .map(|&f| t.frame_names[f].as_str())
+            .collect();
+        let lost = match lost.len() {
+            0 => "never lost".to_string(),
+            n if n <= 6 => format!("lost in {n} frames: {}", lost.join(", ")),
+            n => format!("lost in {n} frames: {}, …", lost[..6].join(", ")),
+        };
+        let iou = t.scores.as_ref().map_or(String::new(), |s| {
+            let s = &s[k];
+            format!(
+                "; IoU against ground truth: mean {:.3}, min {:.3} ({})",
+                s.mean_iou, s.min_iou, t.frame_names[s.worst_frame]
+            )
+        });
+        println!("  {k}: {} — {lost}{iou}", o.seed);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    fn spec(argv: &[&str]) -> Result<Option<TrackSpec>> {
+        let cli = Cli::try_parse_from([&["segment", "SCENE"], argv].concat())?;
+        track_spec(&cli.args)
+    }
+
+    #[test]
+    fn track_flags_build_seeds_in_order_and_refuse_misuse() {
+        assert!(spec(&[]).unwrap().is_none());
+        let t = spec(&[
+            "--track",
+            "--box",
+            "b@1,2,30,40",
+            "--prompt",
+            "a@5,6@train/r_3",
+        ])
+        .unwrap()
+        .unwrap();
+        let names: Vec<&str> = t.seeds.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names, ["a", "b"], "every --prompt, then every --box");
+        assert!(spec(&["--track"]).unwrap().unwrap().seeds.is_empty());
+        let err = |argv: &[&str]| format!("{:#}", spec(argv).unwrap_err());
+        assert!(err(&["--prompt", "a@1,2"]).contains("add --track"));
+        assert!(err(&["--track", "--masks", "gt"]).contains("drop --masks gt"));
+        assert!(err(&["--track", "--prompt", "a@1"]).contains("NAME@x,y"));
+        assert!(err(&["--track", "--box", "a@1,2,0,0"]).contains("x1 > x0"));
+        assert!(err(&["--track", "--max-objects", "0"]).contains("at least 1"));
+    }
 }

@@ -23,8 +23,8 @@ const MLP_DIM: usize = 2048;
 const NUM_MASK_TOKENS: usize = 4;
 const UP1: usize = EMBED_DIM / 4;
 const UP2: usize = EMBED_DIM / 8;
-/// Tokens per prompt: IoU token, 4 mask tokens, the point and the padding point.
-pub const N_TOKENS: usize = 1 + NUM_MASK_TOKENS + 2;
+/// Output tokens ahead of a prompt's sparse tokens: the IoU token and 4 mask tokens.
+const N_OUTPUT_TOKENS: usize = 1 + NUM_MASK_TOKENS;
 /// Side of the low-resolution mask grid (4× the embedding grid).
 pub const LOW_RES: usize = 4 * GRID;
 
@@ -58,9 +58,10 @@ impl Block {
 
     /// Token-side MLP with residual and norm3.
     fn mlp(&self, queries: &mut [f32]) {
-        let mut h = self.lin1.forward(queries, N_TOKENS);
+        let n = queries.len() / EMBED_DIM;
+        let mut h = self.lin1.forward(queries, n);
         relu_inplace(&mut h);
-        add_assign(queries, &self.lin2.forward(&h, N_TOKENS));
+        add_assign(queries, &self.lin2.forward(&h, n));
         self.norm3.apply(queries);
     }
 }
@@ -94,11 +95,30 @@ pub struct Scratch {
     up_m: Vec<f32>,
 }
 
-/// Decoder output for one point prompt (SAM's three multimask outputs).
+/// Which of the decoder's masks a prompt returns (`multimask_output` in SAM's predictor).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outputs {
+    /// Mask tokens 1–3: three nested masks for an ambiguous prompt (one point).
+    Multimask,
+    /// Mask token 0 alone: SAM's single output for an unambiguous prompt (a box, several
+    /// points).
+    Single,
+}
+
+impl Outputs {
+    fn tokens(self) -> std::ops::Range<usize> {
+        match self {
+            Outputs::Multimask => 1..NUM_MASK_TOKENS,
+            Outputs::Single => 0..1,
+        }
+    }
+}
+
+/// Decoder output for one prompt: SAM's three multimask outputs, or its single one.
 #[derive(Debug, Clone)]
 pub struct PromptMasks {
-    pub iou_pred: [f32; 3],
-    /// Low-resolution mask logits, 3 × `rows` × `cols`, covering the top-left `rows`×`cols`
+    pub iou_pred: Vec<f32>,
+    /// Low-resolution mask logits, `iou_pred.len()` × `rows` × `cols`, covering the top-left `rows`×`cols`
     /// of the 256×256 padded low-res frame; `None` when no output passed the IoU gate.
     pub logits: Option<Vec<f32>>,
     pub rows: usize,
@@ -219,10 +239,11 @@ impl MaskDecoder {
         }
     }
 
-    /// Run the two-way transformer for one prompt; returns the output tokens (7×256) and
-    /// leaves the final image tokens in `sc.keys`.
+    /// Run the two-way transformer for one prompt; returns the output tokens ((5 + sparse
+    /// tokens)×256) and leaves the final image tokens in `sc.keys`.
     fn transformer(&self, ctx: &ImageContext, sparse: &[f32], sc: &mut Scratch) -> Vec<f32> {
         let n = GRID * GRID;
+        let nt = N_OUTPUT_TOKENS + sparse.len() / EMBED_DIM;
         let mut point_embedding = self.output_tokens.clone();
         point_embedding.extend_from_slice(sparse);
         let qpe = &point_embedding;
@@ -233,11 +254,11 @@ impl MaskDecoder {
 
         // Block 0 (skip_first_layer_pe: self-attention without residual).
         let b = &self.blocks[0];
-        let mut queries = b.self_attn.forward_small(qpe, qpe, qpe, N_TOKENS);
+        let mut queries = b.self_attn.forward_small(qpe, qpe, qpe, nt);
         b.norm1.apply(&mut queries);
         let out = b
             .t2i
-            .tokens_to_precomputed(&with_pe(&queries), N_TOKENS, &ctx.k0, &ctx.v0);
+            .tokens_to_precomputed(&with_pe(&queries), nt, &ctx.k0, &ctx.v0);
         add_assign(&mut queries, &out);
         b.norm2.apply(&mut queries);
         b.mlp(&mut queries);
@@ -246,7 +267,7 @@ impl MaskDecoder {
             &ctx.keys0,
             &with_pe(&queries),
             &queries,
-            N_TOKENS,
+            nt,
             &mut sc.s,
             &mut sc.attn,
         );
@@ -258,16 +279,12 @@ impl MaskDecoder {
         // Block 1.
         let b = &self.blocks[1];
         let q = with_pe(&queries);
-        let out = b.self_attn.forward_small(&q, &q, &queries, N_TOKENS);
+        let out = b.self_attn.forward_small(&q, &q, &queries, nt);
         add_assign(&mut queries, &out);
         b.norm1.apply(&mut queries);
-        let out = b.t2i.tokens_to_image_folded(
-            &with_pe(&queries),
-            N_TOKENS,
-            &sc.keys,
-            &sc.keys_pe,
-            &mut sc.s,
-        );
+        let out =
+            b.t2i
+                .tokens_to_image_folded(&with_pe(&queries), nt, &sc.keys, &sc.keys_pe, &mut sc.s);
         add_assign(&mut queries, &out);
         b.norm2.apply(&mut queries);
         b.mlp(&mut queries);
@@ -276,7 +293,7 @@ impl MaskDecoder {
             &sc.keys_pe,
             &with_pe(&queries),
             &queries,
-            N_TOKENS,
+            nt,
             &mut sc.s,
             &mut sc.attn,
         );
@@ -287,7 +304,7 @@ impl MaskDecoder {
         // Final token-to-image attention.
         let out = self.final_attn.tokens_to_image_folded(
             &with_pe(&queries),
-            N_TOKENS,
+            nt,
             &sc.keys,
             &sc.keys_pe,
             &mut sc.s,
@@ -297,21 +314,39 @@ impl MaskDecoder {
         queries
     }
 
-    /// Decode one point prompt. `sparse` are its two sparse tokens (see
-    /// `PromptEncoder::point_tokens`); low-res logits are produced for the top-left
-    /// `tok_rows`×`tok_cols` embedding cells (×4 in each direction) when any of the three
-    /// multimask IoU predictions exceeds `iou_gate` (use `f32::NEG_INFINITY` to always get them).
+    /// Decode one point prompt into SAM's three multimask outputs. `sparse` are its two
+    /// sparse tokens (see `PromptEncoder::point_tokens`); low-res logits are produced for the
+    /// top-left `tok_rows`×`tok_cols` embedding cells (×4 in each direction) when any of the
+    /// three IoU predictions exceeds `iou_gate` (use `f32::NEG_INFINITY` to always get them).
     pub fn decode(
         &self,
         ctx: &ImageContext,
         sparse: &[f32],
+        tokens: (usize, usize),
+        iou_gate: f32,
+        sc: &mut Scratch,
+    ) -> PromptMasks {
+        self.decode_prompt(ctx, sparse, Outputs::Multimask, tokens, iou_gate, sc)
+    }
+
+    /// Decode any prompt (`sparse` from `PromptEncoder::tokens`) into the chosen outputs;
+    /// otherwise as [`MaskDecoder::decode`].
+    pub fn decode_prompt(
+        &self,
+        ctx: &ImageContext,
+        sparse: &[f32],
+        outputs: Outputs,
         (tok_rows, tok_cols): (usize, usize),
         iou_gate: f32,
         sc: &mut Scratch,
     ) -> PromptMasks {
+        assert!(
+            !sparse.is_empty() && sparse.len().is_multiple_of(EMBED_DIM),
+            "sparse tokens must be whole {EMBED_DIM}-wide rows"
+        );
         let hs = self.transformer(ctx, sparse, sc);
         let iou = mlp3(&self.iou_head, &hs[..EMBED_DIM]);
-        let iou_pred = [iou[1], iou[2], iou[3]];
+        let iou_pred: Vec<f32> = outputs.tokens().map(|m| iou[m]).collect();
         let (rows, cols) = (4 * tok_rows, 4 * tok_cols);
         if iou_pred.iter().all(|&p| p <= iou_gate) {
             return PromptMasks {
@@ -321,9 +356,9 @@ impl MaskDecoder {
                 cols,
             };
         }
-        // Hypernetwork weights for the multimask outputs (mask tokens 1..4): 3×32.
-        let mut hyper = Vec::with_capacity(3 * UP2);
-        for m in 1..NUM_MASK_TOKENS {
+        // Hypernetwork weights of the chosen mask tokens: outputs × 32.
+        let mut hyper = Vec::with_capacity(iou_pred.len() * UP2);
+        for m in outputs.tokens() {
             hyper.extend(mlp3(
                 &self.hyper[m],
                 &hs[(1 + m) * EMBED_DIM..(2 + m) * EMBED_DIM],
@@ -401,22 +436,23 @@ impl MaskDecoder {
             true,
         );
         gelu_inplace(y2);
-        // Masks: each 32-channel pixel dotted with the three hypernetwork vectors.
+        // Masks: each 32-channel pixel dotted with the hypernetwork vectors (3, or 1).
+        let k = hyper.len() / UP2;
         let m = &mut sc.up_m;
-        m.resize(nt * 16 * 3, 0.0);
-        matmul(nt * 16, 3, UP2, y2, (UP2, 1), hyper, (1, UP2), m, 3, false);
-        scatter_subpixels(m, tok_rows, tok_cols)
+        m.resize(nt * 16 * k, 0.0);
+        matmul(nt * 16, k, UP2, y2, (UP2, 1), hyper, (1, UP2), m, k, false);
+        scatter_subpixels(m, k, tok_rows, tok_cols)
     }
 }
 
 /// Rearrange the upscaler's rows, ordered (token, s1, s2) with s = dy·2 + dx at each 2×2
-/// stage and 3 mask values each, into 3 planes of (4·tok_rows)×(4·tok_cols) pixels.
-fn scatter_subpixels(m: &[f32], tok_rows: usize, tok_cols: usize) -> Vec<f32> {
+/// stage and `k` mask values each, into `k` planes of (4·tok_rows)×(4·tok_cols) pixels.
+fn scatter_subpixels(m: &[f32], k: usize, tok_rows: usize, tok_cols: usize) -> Vec<f32> {
     let (rows, cols) = (4 * tok_rows, 4 * tok_cols);
-    let mut out = vec![0.0f32; 3 * rows * cols];
-    for (token, cell) in m.chunks_exact(16 * 3).enumerate() {
+    let mut out = vec![0.0f32; k * rows * cols];
+    for (token, cell) in m.chunks_exact(16 * k).enumerate() {
         let (y0, x0) = (4 * (token / tok_cols), 4 * (token % tok_cols));
-        for (s, px) in cell.chunks_exact(3).enumerate() {
+        for (s, px) in cell.chunks_exact(k).enumerate() {
             let (s1, s2) = (s / 4, s % 4);
             let y = y0 + 2 * (s1 / 2) + s2 / 2;
             let x = x0 + 2 * (s1 % 2) + s2 % 2;

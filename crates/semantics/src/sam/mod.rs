@@ -13,12 +13,15 @@ pub mod kernels;
 pub mod layers;
 pub mod model;
 pub mod norm;
+pub mod predict;
 pub mod prompt;
 pub mod resize;
 pub mod tiny_vit;
 
-pub use decoder::{ImageContext, MaskDecoder, PromptMasks, Scratch};
+pub use decoder::{ImageContext, MaskDecoder, Outputs, PromptMasks, Scratch};
 pub use model::{Backbone, ImageEmbedding, Sam, MOBILE_SAM_HINT};
+pub use predict::{Prediction, Predictor};
+pub use prompt::Prompt;
 
 use std::path::PathBuf;
 

@@ -258,18 +258,7 @@ fn box_and_multipoint_prompts_match_official_pytorch() {
             bbox: (b[0] >= 0.0).then(|| [b[0], b[1], b[2], b[3]]),
         };
         // Low-res logits straight from the decoder, on the resized frame's coordinates.
-        let map = |x: f32, y: f32| Sam::to_input_frame(&emb, x, y);
-        let input = Prompt {
-            points: prompt
-                .points
-                .iter()
-                .map(|&(x, y, l)| (map(x, y).0, map(x, y).1, l))
-                .collect(),
-            bbox: prompt.bbox.map(|[a, b, c, d]| {
-                let ((a, b), (c, d)) = (map(a, b), map(c, d));
-                [a, b, c, d]
-            }),
-        };
+        let input = pred.to_input(&prompt);
         let out = sam.decoder.decode_prompt(
             &ctx,
             &sam.prompt.tokens(&input),

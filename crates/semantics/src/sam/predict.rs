@@ -54,6 +54,26 @@ impl<'a> Predictor<'a> {
         self.emb.original
     }
 
+    /// `prompt` (original-image pixels) in the resized frame the decoder reads
+    /// (`ResizeLongestSide.apply_coords` / `apply_boxes`).
+    pub fn to_input(&self, prompt: &Prompt) -> Prompt {
+        let map = |x: f32, y: f32| Sam::to_input_frame(&self.emb, x, y);
+        Prompt {
+            points: prompt
+                .points
+                .iter()
+                .map(|&(x, y, pos)| {
+                    let (ix, iy) = map(x, y);
+                    (ix, iy, pos)
+                })
+                .collect(),
+            bbox: prompt.bbox.map(|[x0, y0, x1, y1]| {
+                let ((a, b), (c, d)) = (map(x0, y0), map(x1, y1));
+                [a, b, c, d]
+            }),
+        }
+    }
+
     /// Decode `prompt`, given in original-image pixels, into the chosen outputs (three masks
     /// for [`Outputs::Multimask`], one for [`Outputs::Single`]).
     pub fn predict(&self, prompt: &Prompt, outputs: Outputs, sc: &mut Scratch) -> Vec<Prediction> {
@@ -69,21 +89,7 @@ impl<'a> Predictor<'a> {
         gate: f32,
         sc: &mut Scratch,
     ) -> Vec<Prediction> {
-        let map = |x: f32, y: f32| Sam::to_input_frame(&self.emb, x, y);
-        let input = Prompt {
-            points: prompt
-                .points
-                .iter()
-                .map(|&(x, y, pos)| {
-                    let (ix, iy) = map(x, y);
-                    (ix, iy, pos)
-                })
-                .collect(),
-            bbox: prompt.bbox.map(|[x0, y0, x1, y1]| {
-                let ((a, b), (c, d)) = (map(x0, y0), map(x1, y1));
-                [a, b, c, d]
-            }),
-        };
+        let input = self.to_input(prompt);
         let sparse = self.sam.prompt.tokens(&input);
         let out =
             self.sam

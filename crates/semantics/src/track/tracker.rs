@@ -298,11 +298,11 @@ impl ObjectTrack {
                 .map(|p| self.candidate(p, rgb, (h, w))),
         );
         let score = |c: &Candidate| c.region.iou(reference);
-        let first_plausible = self.plausible(&cands[0], cfg);
+        // The first mask is plausible (the caller checked), so something always qualifies.
         let best = cands
             .iter()
             .enumerate()
-            .filter(|(i, c)| *i == 0 && first_plausible || *i > 0 && self.plausible(c, cfg))
+            .filter(|(_, c)| self.plausible(c, cfg))
             .max_by(|a, b| score(a.1).total_cmp(&score(b.1)))
             .map_or(0, |(i, _)| i);
         cands.swap_remove(best)

@@ -197,7 +197,7 @@ fn clicks_and_boxes_that_name_no_object_are_refused() {
     let refuse = |spec: &str, boxed: bool, needle: &str| {
         let seed = Seed::parse(spec, boxed).unwrap();
         let e = seed
-            .resolve(&pred, &f.file_path, 0.5)
+            .resolve(&pred, &f.file_path, 0.5, &[])
             .unwrap_err()
             .to_string();
         eprintln!("{spec}: {e}");
@@ -216,7 +216,7 @@ fn clicks_and_boxes_that_name_no_object_are_refused() {
     };
     assert!(Seed::parse(&format!("sedan@{x},{y}"), false)
         .unwrap()
-        .resolve(&pred, &f.file_path, 0.5)
+        .resolve(&pred, &f.file_path, 0.5, &[])
         .is_ok());
     refuse("mat@4,176", false, "selects the background");
 }

@@ -48,6 +48,36 @@ impl Region {
         (x0 != usize::MAX).then_some([x0, y0, x1, y1])
     }
 
+    /// The pixels of `self` that `other` lacks.
+    pub fn minus(&self, other: &Region) -> Region {
+        let on = self
+            .on
+            .iter()
+            .zip(&other.on)
+            .map(|(&a, &b)| a && !b)
+            .collect();
+        Region::new(self.width, self.height, on)
+    }
+
+    /// The pixels within `margin` of `self`'s bounding box (clamped to the image) that are
+    /// not in `self`: its immediate surroundings.
+    pub fn ring(&self, margin: usize) -> Region {
+        let mut on = vec![false; self.width * self.height];
+        if let Some([x0, y0, x1, y1]) = self.bbox() {
+            let (x1, y1) = (
+                (x1 + margin).min(self.width - 1),
+                (y1 + margin).min(self.height - 1),
+            );
+            for y in y0.saturating_sub(margin)..=y1 {
+                for x in x0.saturating_sub(margin)..=x1 {
+                    let i = y * self.width + x;
+                    on[i] = !self.on[i];
+                }
+            }
+        }
+        Region::new(self.width, self.height, on)
+    }
+
     /// Mean pixel position (x, y); `None` when empty.
     pub fn centroid(&self) -> Option<(f32, f32)> {
         let (mut sx, mut sy, mut n) = (0.0f64, 0.0f64, 0usize);
@@ -270,6 +300,29 @@ impl Region {
         }
         Histogram(bins)
     }
+
+    /// Distribution of chromaticity (r, g)/(r + g + b) over the mask, 8 × 8 bins over
+    /// [0, 2/3) each (the last bin takes the rest); pixels darker than r + g + b < 48 have
+    /// no reliable chromaticity and are skipped. A cast shadow keeps the chromaticity of
+    /// the surface it darkens (Cucchiara et al. 2003, the HSV shadow test of video
+    /// surveillance), so a shadow's chromaticity is its ground's.
+    pub fn chroma_histogram(&self, rgb: &[u8]) -> Histogram {
+        let mut bins = [0.0f32; HIST_BINS];
+        let mut n = 0.0f32;
+        for (px, _) in rgb.chunks_exact(3).zip(&self.on).filter(|(_, &b)| b) {
+            let s = px.iter().map(|&v| v as u32).sum::<u32>();
+            if s < 48 {
+                continue;
+            }
+            let bin = |v: u8| ((v as u32 * 12 / s) as usize).min(7);
+            bins[bin(px[0]) * 8 + bin(px[1])] += 1.0;
+            n += 1.0;
+        }
+        if n > 0.0 {
+            bins.iter_mut().for_each(|b| *b /= n);
+        }
+        Histogram(bins)
+    }
 }
 
 const HIST_BINS: usize = 64;
@@ -340,6 +393,43 @@ mod tests {
         assert_eq!(Region::empty(20, 10).iou(&Region::empty(20, 10)), 0.0);
         assert_eq!(a.borders_touched(), 0);
         assert_eq!(rect(20, 10, [0, 0, 19, 4]).borders_touched(), 3);
+    }
+
+    #[test]
+    fn minus_and_ring() {
+        let a = rect(20, 10, [2, 3, 5, 6]);
+        let b = rect(20, 10, [4, 3, 7, 6]);
+        assert_eq!(a.minus(&b), rect(20, 10, [2, 3, 3, 6]));
+        assert_eq!(a.minus(&a).area(), 0);
+        let ring = a.ring(1);
+        assert_eq!(ring.area(), 6 * 6 - 4 * 4);
+        assert_eq!(ring.bbox(), Some([1, 2, 6, 7]));
+        assert_eq!(
+            rect(20, 10, [0, 0, 19, 9]).ring(3).area(),
+            0,
+            "clamped to the image"
+        );
+    }
+
+    #[test]
+    fn chromaticity_ignores_brightness_and_dark_pixels() {
+        let r = rect(2, 1, [0, 0, 1, 0]);
+        let lit = [200u8, 120, 60, 200, 120, 60];
+        let shaded = [100u8, 60, 30, 100, 60, 30];
+        let grey = [90u8, 90, 90, 90, 90, 90];
+        let (a, b) = (r.chroma_histogram(&lit), r.chroma_histogram(&shaded));
+        assert!(
+            (a.similarity(&b) - 1.0).abs() < 1e-6,
+            "a shadow keeps its chromaticity"
+        );
+        assert!(a.similarity(&r.chroma_histogram(&grey)) < 0.01);
+        assert_eq!(
+            r.chroma_histogram(&[10, 10, 10, 5, 5, 5])
+                .0
+                .iter()
+                .sum::<f32>(),
+            0.0
+        );
     }
 
     #[test]

@@ -10,7 +10,7 @@ use crate::automask::stability_score;
 use crate::sam::{Outputs, Prediction, Predictor, Prompt, Scratch};
 
 /// Least stability score of the mask a click selects (see `Seed::resolve`).
-const MIN_SEED_STABILITY: f32 = 0.7;
+pub(crate) const MIN_SEED_STABILITY: f32 = 0.7;
 
 /// Where the object is shown, in original-image pixels.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -94,15 +94,26 @@ impl Seed {
         })
     }
 
+    /// Where the prompt points (a click, a box's centre); none for a mask.
+    pub fn anchor(&self) -> Option<[f32; 2]> {
+        match &self.shape {
+            SeedShape::Point(p) => Some(*p),
+            SeedShape::Box([x0, y0, x1, y1]) => Some([(x0 + x1) / 2.0, (y0 + y1) / 2.0]),
+            SeedShape::Mask(_) => None,
+        }
+    }
+
     /// The object's mask on its seed frame: the largest stable one of SAM's three nested
-    /// masks for a click, the single mask for a box. Refused when the prompt lies outside the image, selects nothing,
-    /// or selects the background (over `max_area` of the image, or touching three or more of
-    /// its sides).
+    /// masks for a click that holds none of `others` (the other objects' clicks on this
+    /// frame), the single mask for a box. Refused when the prompt lies outside the image,
+    /// selects nothing, or selects the background (over `max_area` of the image, or
+    /// touching three or more of its sides).
     pub fn resolve(
         &self,
         pred: &Predictor,
         frame_name: &str,
         max_area: f32,
+        others: &[[f32; 2]],
     ) -> Result<Region, TrackError> {
         let (h, w) = pred.size();
         let inside = |x: f32, y: f32| x >= 0.0 && y >= 0.0 && x < w as f32 && y < h as f32;
@@ -125,13 +136,23 @@ impl Seed {
                 // most confident. The most confident alone often names a part (the green
                 // SUV's roof on toycars scene1 at 480×360: IoU 0.07, the whole 0.97); the
                 // largest alone can merge two cars at 160×120 (stability 0.13–0.24 there,
-                // 0.76–0.97 for the single vehicles).
+                // 0.76–0.97 for the single vehicles), and even a stable one can when the
+                // cars touch in the image (toycars scene2 at frame 62: the green SUV's
+                // click took it and the white SUV in front, stability 0.97), so a mask that
+                // holds another object's click is not this object's.
                 let preds = pred.predict(&prompt, Outputs::Multimask, &mut sc);
                 let stable =
                     |p: &&Prediction| stability_score(&p.logits, 0.0, 1.0) >= MIN_SEED_STABILITY;
+                let alone = |p: &&Prediction| {
+                    others.iter().all(|&[x, y]| {
+                        let (i, j) = (y as usize, x as usize);
+                        !(i < h && j < w && p.logits[i * w + j] > 0.0)
+                    })
+                };
                 let chosen = preds
                     .iter()
                     .filter(stable)
+                    .filter(alone)
                     .max_by_key(|p| p.logits.iter().filter(|&&v| v > 0.0).count())
                     .or_else(|| {
                         preds

@@ -118,7 +118,11 @@ pub fn track_sequence(
         let pred = Predictor::new(sam, fr.rgb, fr.height, fr.width)?;
         let mut found = step_all(&pred, fr, f, &mut forward, cfg);
         for (k, seed) in seeds.iter().enumerate().filter(|(k, _)| starts[*k] == f) {
-            let region = seed.resolve(&pred, fr.name, cfg.max_area)?;
+            let others: Vec<[f32; 2]> = (0..seeds.len())
+                .filter(|&o| o != k && starts[o] == f)
+                .filter_map(|o| seeds[o].anchor())
+                .collect();
+            let region = seed.resolve(&pred, fr.name, cfg.max_area, &others)?;
             forward[k] = ObjectTrack::start(&seed.name, region.clone(), fr.rgb, f);
             seed_regions[k] = Some(region.clone());
             found.push((k, seed_found(region)));

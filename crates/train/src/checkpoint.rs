@@ -118,9 +118,20 @@ fn state_bytes(tr: &Trainer) -> Result<Vec<u8>> {
         .map_err(|e| TrainError::Data(format!("safetensors: {e}")))
 }
 
+/// A file in a checkpoint folder that exempts it from pruning; it says why it is kept.
+pub const KEEP_NAME: &str = "KEEP";
+
+/// [`save`], and keep that checkpoint whatever `keep_checkpoints` says (the wall-time
+/// marks of `log.checkpoint_minutes`); `why` is written into its `KEEP` file.
+pub fn save_kept(tr: &Trainer, run: &Path, why: &str) -> Result<PathBuf> {
+    let dir = save(tr, run)?;
+    atomic_write(&dir.join(KEEP_NAME), why.as_bytes())?;
+    Ok(dir)
+}
+
 /// Writes a checkpoint of `tr` under `run/checkpoints/` and points `latest` at it; keeps the
-/// newest `tr.cfg.log.keep_checkpoints`, and the one at the regularizer's fork point
-/// ([`crate::fork`]) when present. Returns its folder.
+/// newest `tr.cfg.log.keep_checkpoints`, the one at the regularizer's fork point
+/// ([`crate::fork`]) when present, and those saved by [`save_kept`]. Returns its folder.
 pub fn save(tr: &Trainer, run: &Path) -> Result<PathBuf> {
     // Never a checkpoint of a diverged state: the last good one stays `latest`.
     if let Some(what) = crate::finite::locate(tr) {
@@ -190,8 +201,8 @@ fn remove_partial(root: &Path) {
     }
 }
 
-/// Removes all but the newest `keep` checkpoints (never `current` or `pinned`); failures
-/// only log.
+/// Removes all but the newest `keep` checkpoints (never `current`, `pinned` or one with a
+/// `KEEP` file); failures only log.
 fn prune_old(root: &Path, current: &str, pinned: Option<&str>, keep: usize) {
     let Ok(rd) = std::fs::read_dir(root) else {
         return;
@@ -199,6 +210,7 @@ fn prune_old(root: &Path, current: &str, pinned: Option<&str>, keep: usize) {
     let mut names: Vec<String> = rd
         .filter_map(|e| e.ok()?.file_name().into_string().ok())
         .filter(|n| n.starts_with("iter_") && Some(n.as_str()) != pinned)
+        .filter(|n| !root.join(n).join(KEEP_NAME).exists())
         .collect();
     names.sort();
     let excess = names.len().saturating_sub(keep.max(1));

@@ -100,6 +100,13 @@ pub struct LrConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DensifyConfig {
+    /// Which Gaussians exist (docs/training.md "Density control"): `adaptive` is 3DGS's
+    /// clone/split/prune with opacity resets, as Deformable-3DGS trains (the faithful
+    /// default); `mcmc` is 3DGS-MCMC (Kheradmand et al. 2024, as gsplat's `MCMCStrategy`):
+    /// a hard cap, dead Gaussians relocated onto live ones, noise on near-transparent ones.
+    pub strategy: crate::densify::Strategy,
+    /// Refinement runs at iterations `from < it < until` that are multiples of `interval`
+    /// (`mcmc` ends at `mcmc.until` instead).
     pub from: u32,
     pub until: u32,
     pub interval: u32,
@@ -117,6 +124,8 @@ pub struct DensifyConfig {
     pub reset_opacity: f32,
     /// Children per split Gaussian (3DGS: 2), scaled down by 1/(0.8·children).
     pub split_children: usize,
+    /// The `mcmc` strategy's constants (ignored by `adaptive`).
+    pub mcmc: crate::densify::McmcConfig,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -144,6 +153,11 @@ pub struct LogConfig {
     pub eval_frames: usize,
     /// Checkpoints kept on disk (older ones are deleted).
     pub keep_checkpoints: usize,
+    /// Also save a checkpoint, kept whatever `keep_checkpoints` says, when the run's wall
+    /// time (every resumed segment, evaluations and saves included) first passes each of
+    /// these marks, in minutes: quality after 10, 30, 60 minutes is `eval --iteration` of
+    /// those (`train --checkpoint-minutes`; docs/performance.md "Time to quality").
+    pub checkpoint_minutes: Vec<f64>,
 }
 
 impl Default for TrainConfig {
@@ -245,6 +259,8 @@ impl Default for DensifyConfig {
             opacity_reset_interval: 3000,
             reset_opacity: 0.01,
             split_children: 2,
+            strategy: crate::densify::Strategy::Adaptive,
+            mcmc: crate::densify::McmcConfig::default(),
         }
     }
 }
@@ -272,6 +288,7 @@ impl Default for LogConfig {
             log_interval: 100,
             eval_frames: 0,
             keep_checkpoints: 2,
+            checkpoint_minutes: Vec::new(),
         }
     }
 }
@@ -340,6 +357,7 @@ impl TrainConfig {
         c.lr.field_max_steps = every(c.lr.field_max_steps);
         c.densify.from = at(c.densify.from);
         c.densify.until = at(c.densify.until);
+        c.densify.mcmc.until = at(c.densify.mcmc.until);
         c.densify.interval = window(c.densify.interval, MIN_DENSIFY_INTERVAL);
         // 3DGS starts the size pruning after the first opacity reset
         // (`size_threshold = 20 if iteration > opacity_reset_interval`), so it takes the
@@ -489,6 +507,9 @@ impl TrainConfig {
             ));
         }
         nonzero("densify.split_children", d.split_children as u64)?;
+        d.mcmc
+            .validate()
+            .map_err(|(key, why)| TrainError::config(&format!("densify.mcmc.{key}"), why))?;
         if d.split_children > MAX_SPLIT_CHILDREN {
             return Err(TrainError::config(
                 "densify.split_children",
@@ -502,6 +523,17 @@ impl TrainConfig {
             ));
         }
         nonzero("sh.degree_interval", self.sh.degree_interval as u64)?;
+        if let Some(m) = self
+            .log
+            .checkpoint_minutes
+            .iter()
+            .find(|m| !(m.is_finite() && **m > 0.0))
+        {
+            return Err(TrainError::config(
+                "log.checkpoint_minutes",
+                format!("must be finite and > 0, got {m}"),
+            ));
+        }
         unit("loss.lambda_dssim", self.loss.lambda_dssim)?;
         self.reg
             .validate()

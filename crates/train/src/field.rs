@@ -3,7 +3,7 @@
 
 use crate::config::FieldConfig;
 use crate::encoding::{encode_rows, encoded_dim};
-use crate::mlp::{Mlp, MlpCache};
+use crate::mlp::{Mlp, MlpCache, PackedRows};
 use rand::Rng;
 
 /// Outputs of the field head: δx (3), δr (4), δs (3).
@@ -45,6 +45,8 @@ pub struct DeformField {
     d_out: Vec<f32>,
     /// Gaussians evaluated by the last forward.
     rows: Vec<u32>,
+    /// Scratch of the backward over the rows that received a gradient.
+    packed: PackedRows,
 }
 
 impl DeformField {
@@ -57,6 +59,7 @@ impl DeformField {
             enc: Vec::new(),
             d_out: Vec::new(),
             rows: Vec::new(),
+            packed: PackedRows::default(),
         }
     }
 
@@ -99,8 +102,18 @@ impl DeformField {
                 o[7..10].fill(0.0); // δs is not applied: no gradient reaches its head
             }
         }
-        self.mlp
-            .backward(&self.enc, &self.d_out, &mut self.cache, grad);
+        self.mlp.backward_nonzero(
+            &self.enc,
+            &self.d_out,
+            &mut self.cache,
+            &mut self.packed,
+            grad,
+        );
+    }
+
+    /// Rows the last backward pass back-propagated: those with a nonzero `dL/dδ`.
+    pub fn rows_with_gradient(&self) -> usize {
+        self.packed.kept()
     }
 
     /// Gaussians evaluated by the last forward.

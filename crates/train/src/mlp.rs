@@ -48,6 +48,22 @@ pub struct MlpCache {
     jobs: Vec<JobBuffers>,
 }
 
+/// Scratch of [`Mlp::backward_nonzero`]: the rows it kept, packed.
+#[derive(Clone, Debug, Default)]
+pub struct PackedRows {
+    keep: Vec<usize>,
+    input: Vec<f32>,
+    d_out: Vec<f32>,
+    cache: MlpCache,
+}
+
+impl PackedRows {
+    /// Rows the last [`Mlp::backward_nonzero`] back-propagated (all when it did not pack).
+    pub fn kept(&self) -> usize {
+        self.keep.len()
+    }
+}
+
 #[derive(Clone, Debug, Default)]
 struct JobBuffers {
     grad: Vec<f32>,
@@ -231,6 +247,77 @@ impl Mlp {
         }
     }
 
+    /// [`Self::backward`] over only the rows whose `d_out` is not all zero, packed into
+    /// `packed` (scratch reused across calls). A zero row adds exactly nothing to any
+    /// parameter's gradient (its dL/dz is zero through every layer), and in training most
+    /// rows are zero: Gaussians the field moved that no pixel composited (hidden behind
+    /// others, transparent, or outside every tile they were binned to). Equal to the full
+    /// backward up to the order of the sums (packed rows fall in other chunks), and
+    /// thread-count independent like it.
+    pub fn backward_nonzero(
+        &self,
+        input: &[f32],
+        d_out: &[f32],
+        cache: &mut MlpCache,
+        packed: &mut PackedRows,
+        grad: &mut Vec<f32>,
+    ) {
+        let rows = cache.rows;
+        packed.keep.clear();
+        packed.keep.extend(
+            d_out
+                .chunks_exact(self.out_dim)
+                .enumerate()
+                .filter(|(_, d)| d.iter().any(|&v| v != 0.0))
+                .map(|(r, _)| r),
+        );
+        // Packing costs a copy of each kept row's activations: not worth it when few drop.
+        if packed.keep.len() * 10 >= rows * 9 {
+            return self.backward(input, d_out, cache, grad);
+        }
+        let PackedRows {
+            keep,
+            input: p_in,
+            d_out: p_dout,
+            cache: p_cache,
+        } = packed;
+        p_in.clear();
+        p_dout.clear();
+        for &r in keep.iter() {
+            p_in.extend_from_slice(&input[r * self.in_dim..(r + 1) * self.in_dim]);
+            p_dout.extend_from_slice(&d_out[r * self.out_dim..(r + 1) * self.out_dim]);
+        }
+        self.gather_acts(cache, keep, p_cache);
+        self.backward(p_in, p_dout, p_cache, grad);
+    }
+
+    /// `out` = the activations of rows `keep` (ascending) of `cache`, in the chunk-major
+    /// layout a forward pass over those rows alone would have written.
+    fn gather_acts(&self, cache: &MlpCache, keep: &[usize], out: &mut MlpCache) {
+        let (w, depth, rows, m) = (self.width, self.depth, cache.rows, keep.len());
+        // Offset of (row r of a pass over `total` rows, layer l) in the chunk-major layout.
+        let at = |r: usize, l: usize, total: usize| {
+            let c = r / ROW_CHUNK;
+            let n = (total - c * ROW_CHUNK).min(ROW_CHUNK);
+            c * ROW_CHUNK * w * depth + l * n * w + (r % ROW_CHUNK) * w
+        };
+        out.rows = m;
+        out.acts.resize(m * w * depth, 0.0);
+        out.acts
+            .par_chunks_mut(ROW_CHUNK * w * depth)
+            .enumerate()
+            .for_each(|(c, chunk)| {
+                let base = c * ROW_CHUNK * w * depth;
+                let k1 = ((c + 1) * ROW_CHUNK).min(m);
+                for (k, &r) in keep.iter().enumerate().take(k1).skip(c * ROW_CHUNK) {
+                    for l in 0..depth {
+                        let (d, s) = (at(k, l, m) - base, at(r, l, rows));
+                        chunk[d..d + w].copy_from_slice(&cache.acts[s..s + w]);
+                    }
+                }
+            });
+    }
+
     /// Backward of the `n` rows starting at `c0` (one forward chunk) into `b.grad`.
     fn chunk_backward(
         &self,
@@ -350,6 +437,42 @@ mod tests {
         }
         let rel = (diff / norm).sqrt();
         assert!(rel < 2e-2, "relative gradient error {rel}");
+    }
+
+    /// Zero rows of dL/dout dropped: the gradient equals the full backward's up to
+    /// summation order, at every share of zero rows (packed and not).
+    #[test]
+    fn backward_over_nonzero_rows_equals_the_full_one() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let (ind, rows) = (6, 2 * ROW_CHUNK * CHUNKS_PER_JOB + 300);
+        let mlp = Mlp::new(ind, 16, 4, 1, 10, &mut rng);
+        let x: Vec<f32> = (0..rows * ind).map(|_| rng.gen_range(-1.0..1.0)).collect();
+        for zero_share in [0.0, 0.5, 0.97] {
+            let d: Vec<f32> = (0..rows)
+                .flat_map(|_| {
+                    let zero = rng.gen::<f64>() < zero_share;
+                    (0..10)
+                        .map(|_| if zero { 0.0 } else { rng.gen_range(-1.0..1.0) })
+                        .collect::<Vec<f32>>()
+                })
+                .collect();
+            let mut c = MlpCache::default();
+            mlp.forward(&x, rows, &mut c);
+            let (mut full, mut part) = (Vec::new(), Vec::new());
+            mlp.backward(&x, &d, &mut c, &mut full);
+            let mut packed = PackedRows::default();
+            mlp.backward_nonzero(&x, &d, &mut c, &mut packed, &mut part);
+            let live = d.chunks(10).filter(|r| r.iter().any(|&v| v != 0.0)).count();
+            assert_eq!(packed.kept(), live);
+            let norm = full.iter().map(|v| v * v).sum::<f32>().sqrt();
+            let diff = full
+                .iter()
+                .zip(&part)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f32>()
+                .sqrt();
+            assert!(diff <= 1e-5 * norm, "share {zero_share}: {diff} vs {norm}");
+        }
     }
 
     #[test]

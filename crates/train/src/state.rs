@@ -161,6 +161,32 @@ impl GaussianState {
         self.append_rows(new);
     }
 
+    /// Moves Gaussian `src` into row `dst` (MCMC relocation: a dead Gaussian becomes a copy
+    /// of a live one): parameters, object and hook rows copied; `dst`'s moments and
+    /// statistics zeroed, since those described the Gaussian that was there.
+    pub fn copy_row(&mut self, src: usize, dst: usize) {
+        for (arr, r) in self.model.arrays_mut().into_iter().zip(ROWS) {
+            arr.copy_within(src * r..(src + 1) * r, dst * r);
+        }
+        for a in &mut self.aux {
+            let c = a.cols;
+            a.data.copy_within(src * c..(src + 1) * c, dst * c);
+        }
+        self.object[dst] = self.object[src];
+        self.zero_moments(dst);
+    }
+
+    /// Zeroes row `i`'s Adam moments (every group) and densification statistics.
+    pub fn zero_moments(&mut self, i: usize) {
+        for (a, r) in self.adam.iter_mut().zip(ROWS) {
+            a.m[i * r..(i + 1) * r].fill(0.0);
+            a.v[i * r..(i + 1) * r].fill(0.0);
+        }
+        for s in self.stats.arrays_mut() {
+            s[i] = 0.0;
+        }
+    }
+
     /// Appends the Gaussians of a new object (`objects::start`): zero moments, statistics
     /// and hook rows, `object` in the column.
     pub fn append_object(&mut self, new: &GaussianModel, object: u8) {

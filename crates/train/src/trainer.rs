@@ -14,7 +14,7 @@ use crate::model::{GaussianModel, SH_COEFFS};
 use crate::state::GaussianState;
 use crate::timing::{Phase, StepTimings};
 use rand::seq::SliceRandom;
-use rand::SeedableRng;
+use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use scene::Dataset;
 use splat::{Colors, Gaussians, Gradients, Rasterizer, RenderOptions};
@@ -24,7 +24,8 @@ use splat::{Colors, Gaussians, Gradients, Rasterizer, RenderOptions};
 pub struct StepStats {
     pub iteration: u32,
     pub loss: LossValue,
-    /// Extra loss returned by the hook and the rigid objects' mask term (0 without them).
+    /// Extra loss: the hook's, the rigid objects' mask term and the `mcmc` strategy's
+    /// opacity and scale penalties (0 without them).
     pub extra_loss: f32,
     pub psnr: f64,
     pub num_gaussians: usize,
@@ -224,7 +225,7 @@ impl Trainer {
             });
         }
         let objects_loss = self.backward(fi, active, &mut tm)?;
-        let (densify, finite) = self.optimize_and_densify(it, fi, active, &mut tm);
+        let (densify, finite, penalty) = self.optimize_and_densify(it, fi, active, &mut tm);
         let culprit = if finite {
             crate::finite::locate_objects(self)
         } else {
@@ -241,7 +242,7 @@ impl Trainer {
         Ok(StepStats {
             iteration: it,
             loss,
-            extra_loss: extra_loss + objects_loss,
+            extra_loss: extra_loss + objects_loss + penalty,
             psnr,
             num_gaussians: self.state.len(),
             field_active: active,
@@ -438,17 +439,17 @@ impl Trainer {
         Ok(objects_loss)
     }
 
-    /// Adam on the field and Gaussians, then density control (3DGS `train.py` order). On
-    /// iterations that densify, 3DGS's new tensors have no `.grad`, so the Gaussian step is
-    /// skipped; after an opacity reset the opacity step is skipped. The field always steps.
-    /// Also returns whether every value the optimizer wrote is finite.
+    /// Adam on the field and Gaussians, then density control (3DGS `train.py` order; what
+    /// the strategy does when: `densify::Schedule`). The field always steps. Returns the
+    /// refinement's report, whether every value the optimizer wrote is finite, and the
+    /// `mcmc` penalties' loss.
     fn optimize_and_densify(
         &mut self,
         it: u32,
         frame: usize,
         active: bool,
         tm: &mut StepTimings,
-    ) -> (Option<DensifyReport>, bool) {
+    ) -> (Option<DensifyReport>, bool, f32) {
         let t0 = std::time::Instant::now();
         let c = &self.cfg;
         let hp = AdamHyper {
@@ -464,13 +465,21 @@ impl Trainer {
                 .step(&mut self.field.mlp.params, &self.ws.field_grad, hp, lr);
         }
         let d = c.densify.clone();
-        let in_densify = it < d.until;
-        let densify_now = in_densify && it > d.from && it.is_multiple_of(d.interval);
         let white = self.dataset.background == [1.0; 3];
-        let reset_now =
-            in_densify && (it.is_multiple_of(d.opacity_reset_interval) || (white && it == d.from));
-        if !densify_now {
-            finite &= self.adam_gaussians(it, hp, !reset_now);
+        let plan = densify::Schedule::at(&d, it, white);
+        let lr_means = self.means_lr(it);
+        let mut penalty = 0.0;
+        if plan.mcmc_terms {
+            let g = &mut self.ws;
+            penalty = densify::mcmc::add_penalty_grads(
+                &self.state.model,
+                &d.mcmc,
+                &mut g.grads.opacity_logits,
+                &mut g.canon.log_scales,
+            );
+        }
+        if plan.step_gaussians {
+            finite &= self.adam_gaussians(lr_means, hp, plan.step_opacity);
         }
         if let Some(node) = self.objects.as_mut() {
             node.step(hp);
@@ -478,49 +487,59 @@ impl Trainer {
         tm.record(Phase::Optimizer, t0);
         let t0 = std::time::Instant::now();
         let mut report = None;
-        if in_densify {
+        if plan.collect_stats {
             let (w, h) = self.ws.size;
             self.state
                 .stats
                 .add(&self.ws.radii, &self.ws.grads.means2d, w, h);
-            if densify_now {
-                if let Some(node) = &self.objects {
-                    let at = crate::objects::membership::StepPlacement {
-                        deformed: &self.ws.deformed,
-                        background_rows: active.then_some(self.ws.rows.as_slice()),
-                        time: self.dataset.train[frame].time,
-                    };
-                    let moved = node.transfer(&mut self.state, &at);
-                    tracing::debug!(iteration = it, moved, "object membership transfers");
-                }
-                let prune_screen = it > d.screen_size_after;
-                report = Some(densify::densify_and_prune(
-                    &mut self.state,
-                    &d,
-                    self.extent,
-                    prune_screen,
-                    &mut self.rng,
-                ));
+        }
+        if plan.refine {
+            if let Some(node) = &self.objects {
+                let at = crate::objects::membership::StepPlacement {
+                    deformed: &self.ws.deformed,
+                    background_rows: active.then_some(self.ws.rows.as_slice()),
+                    time: self.dataset.train[frame].time,
+                };
+                let moved = node.transfer(&mut self.state, &at);
+                tracing::debug!(iteration = it, moved, "object membership transfers");
             }
-            if reset_now {
-                densify::reset_opacity(&mut self.state, d.reset_opacity);
-            }
+            let prune_screen = it > d.screen_size_after;
+            report = Some(densify::refine(
+                &mut self.state,
+                &d,
+                self.extent,
+                prune_screen,
+                &mut self.rng,
+            ));
+        }
+        if plan.reset_opacity {
+            densify::reset_opacity(&mut self.state, d.reset_opacity);
+        }
+        if plan.mcmc_terms {
+            let key = self.rng.next_u64();
+            densify::mcmc::inject_noise(&mut self.state.model, lr_means * d.mcmc.noise_lr, key);
         }
         tm.record(Phase::Densify, t0);
-        (report, finite)
+        (report, finite, penalty)
     }
 
-    /// Adam on the five Gaussian groups; whether every value written is finite.
-    fn adam_gaussians(&mut self, it: u32, hp: AdamHyper, step_opacity: bool) -> bool {
+    /// The means' learning rate at iteration `it` (3DGS's exponential decay, × the spatial
+    /// scale Deformable-3DGS applies).
+    fn means_lr(&self, it: u32) -> f32 {
         let c = &self.cfg.lr;
-        let s = &mut self.state;
-        let g = &self.ws;
-        let lr_means = expon_lr(
+        expon_lr(
             c.position_init * c.spatial_scale,
             c.position_final * c.spatial_scale,
             c.position_max_steps,
             it,
-        );
+        )
+    }
+
+    /// Adam on the five Gaussian groups; whether every value written is finite.
+    fn adam_gaussians(&mut self, lr_means: f32, hp: AdamHyper, step_opacity: bool) -> bool {
+        let c = &self.cfg.lr;
+        let s = &mut self.state;
+        let g = &self.ws;
         let [a_means, a_quats, a_scales, a_opacity, a_sh] = &mut s.adam;
         let mut ok = a_means.step(&mut s.model.means, &g.canon.means, hp, lr_means);
         ok &= a_quats.step(&mut s.model.quats, &g.canon.quats, hp, c.rotation);

@@ -46,17 +46,65 @@ fn short_training_raises_psnr() {
 /// count either (`splat` sums each Gaussian's gradient over its tiles in a fixed order).
 #[test]
 fn resume_equals_uninterrupted() {
-    resume_check();
+    resume_check_with(common::small_config(80));
 }
 
-fn resume_check() {
+/// The small schedule with MCMC density control: a cap just above the 4,000-point init,
+/// so both relocation and growth happen within a few refinements.
+fn mcmc_config(iters: u32) -> train::TrainConfig {
+    let mut c = common::small_config(iters);
+    c.densify.strategy = train::densify::Strategy::Mcmc;
+    c.densify.mcmc.until = c.densify.until;
+    c.densify.mcmc.cap = 4500;
+    c.validate().unwrap();
+    c
+}
+
+/// MCMC density control trains as well (≥ 6 dB over the init in 300 iterations), never
+/// holds more than its cap, and both moves dead Gaussians and adds new ones.
+#[test]
+fn mcmc_training_raises_psnr_within_the_cap() {
+    let cfg = mcmc_config(300);
+    let cap = cfg.densify.mcmc.cap;
+    let mut tr = Trainer::new(cfg, common::dataset(), 7).unwrap();
+    let before = train_psnr(&mut tr);
+    let (mut relocated, mut added) = (0, 0);
+    for _ in 0..300 {
+        let s = tr.step().unwrap();
+        assert!(s.num_gaussians <= cap, "{} > cap {cap}", s.num_gaussians);
+        if let Some(d) = s.densify {
+            assert_eq!(
+                d.cloned + d.split + d.pruned,
+                0,
+                "MCMC neither clones nor prunes"
+            );
+            (relocated, added) = (relocated + d.relocated, added + d.added);
+        }
+    }
+    let after = train_psnr(&mut tr);
+    assert_eq!(tr.state.len(), cap, "grown to the cap");
+    assert!(
+        relocated > 0 && added > 0,
+        "relocated {relocated}, added {added}"
+    );
+    assert!(after > before + 6.0, "PSNR {before:.2} → {after:.2}");
+    assert!(tr.state.is_aligned());
+}
+
+/// MCMC's noise and draws come from the run's RNG and a counter-based generator: a stopped
+/// and resumed run ends bit-identical, on another thread count.
+#[test]
+fn mcmc_resume_equals_uninterrupted() {
+    resume_check_with(mcmc_config(80));
+}
+
+fn resume_check_with(cfg: train::TrainConfig) {
     let pool = |n: usize| {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build()
             .unwrap()
     };
-    let cfg = common::small_config(80);
     let a = pool(2).install(|| {
         let mut a = Trainer::new(cfg.clone(), common::dataset(), 3).unwrap();
         for _ in 0..80 {

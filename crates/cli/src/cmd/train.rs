@@ -64,6 +64,11 @@ pub struct Args {
     /// [reg] (`compare` does this for its SemDynReg run).
     #[arg(long, value_name = "FROM", conflicts_with_all = ["scene", "resume", "seed", "downscale", "white_background"])]
     pub fork: Option<PathBuf>,
+    /// Also keep a checkpoint when the run's wall time first passes each of these marks
+    /// (minutes, e.g. `10,30,60`; sets `log.checkpoint_minutes`), for quality against time:
+    /// `semdynreg eval RUN --iteration N` scores each.
+    #[arg(long, value_delimiter = ',', value_name = "MINUTES")]
+    pub checkpoint_minutes: Option<Vec<f64>>,
 }
 
 /// The config of a new run: the defaults or --config, rescaled by --iters, --reg/--no-reg.
@@ -74,6 +79,10 @@ fn new_config(a: &Args) -> Result<TrainConfig> {
     }
     if a.objects || a.no_objects {
         cfg.objects.enabled = a.objects;
+    }
+    if let Some(m) = &a.checkpoint_minutes {
+        cfg.log.checkpoint_minutes = m.clone();
+        cfg.validate()?;
     }
     Ok(cfg)
 }
@@ -123,9 +132,16 @@ fn fresh(a: &Args) -> Result<Trainer> {
 }
 
 fn resumed(a: &Args) -> Result<Trainer> {
-    if a.config.is_some() || a.iters.is_some() || a.reg || a.no_reg || a.objects || a.no_objects {
+    if a.config.is_some()
+        || a.iters.is_some()
+        || a.reg
+        || a.no_reg
+        || a.objects
+        || a.no_objects
+        || a.checkpoint_minutes.is_some()
+    {
         bail!(
-            "--resume continues with the run's saved config; drop --config/--iters/--reg/--no-reg/--objects"
+            "--resume continues with the run's saved config; drop --config/--iters/--reg/--no-reg/--objects/--checkpoint-minutes"
         );
     }
     let info = RunInfo::load(&a.out)?;
@@ -289,12 +305,27 @@ pub fn run(a: Args) -> Result<()> {
             )?;
         }
         let interrupted = stop.load(Ordering::SeqCst);
+        let seconds_before_step = tr.train_seconds;
         tr.train_seconds = before + start.elapsed().as_secs_f64();
+        if let Some(m) = passed_mark(&l.checkpoint_minutes, seconds_before_step, tr.train_seconds) {
+            let why = format!(
+                "wall-time mark {m} min (at {:.1} min)",
+                tr.train_seconds / 60.0
+            );
+            let dir = checkpoint::save_kept(&tr, &a.out, &why)?;
+            last_saved = Some(it);
+            append_jsonl(
+                &log,
+                &serde_json::json!({"iteration": it, "wall_mark_minutes": m, "elapsed_s": tr.train_seconds}),
+            )?;
+            pb.println(format!("[{it}] {why}: kept {}", dir.display()));
+        }
         let fork_point = train::fork::fork_point(&tr.cfg.reg) == Some(it);
-        if (l.checkpoint_interval > 0 && it % l.checkpoint_interval == 0)
+        let due = (l.checkpoint_interval > 0 && it % l.checkpoint_interval == 0)
             || fork_point
-            || interrupted
-        {
+            || interrupted;
+        // A second save of this iteration would replace the kept one (and its KEEP file).
+        if due && last_saved != Some(it) {
             let dir = checkpoint::save(&tr, &a.out)?;
             last_saved = Some(it);
             tracing::info!("checkpoint {}", dir.display());
@@ -313,6 +344,15 @@ pub fn run(a: Args) -> Result<()> {
     }
     write_timings(&tr, &a.out, start.elapsed().as_secs_f64(), first)?;
     Ok(())
+}
+
+/// The largest of `marks` (minutes) in `(before, now]` (seconds), if any.
+fn passed_mark(marks: &[f64], before: f64, now: f64) -> Option<f64> {
+    marks
+        .iter()
+        .copied()
+        .filter(|m| before < m * 60.0 && m * 60.0 <= now)
+        .reduce(f64::max)
 }
 
 /// What a failed step leaves: the last checkpoint (never a diverged one).

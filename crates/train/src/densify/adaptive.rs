@@ -1,38 +1,18 @@
-//! Adaptive density control of 3DGS (`densify_and_prune`, `densify_and_clone`,
+//! 3DGS adaptive density control (`densify_and_prune`, `densify_and_clone`,
 //! `densify_and_split`, `reset_opacity`), applied to [`GaussianState`] so that parameters,
-//! Adam moments and statistics move together.
+//! Adam moments and statistics move together. Deformable-3DGS trains with exactly this.
 
+use super::{max_scale, rotation, DensifyReport};
 use crate::config::DensifyConfig;
 use crate::model::{inverse_sigmoid, sigmoid};
 use crate::state::{DensifyStats, GaussianState};
 use rand::Rng;
-
-/// What one densification did, for logs.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct DensifyReport {
-    pub cloned: usize,
-    pub split: usize,
-    pub pruned: usize,
-}
-
-fn max_scale(log_scales: &[f32], i: usize) -> f32 {
-    log_scales[i * 3..i * 3 + 3]
-        .iter()
-        .fold(f32::NEG_INFINITY, |a, &b| a.max(b))
-        .exp()
-}
 
 /// Standard normal sample (Box–Muller), so the split draws come from the run's ChaCha RNG.
 fn normal(rng: &mut impl Rng) -> f32 {
     let u1: f32 = rng.gen_range(f32::EPSILON..1.0);
     let u2: f32 = rng.gen();
     (-2.0 * u1.ln()).sqrt() * (std::f32::consts::TAU * u2).cos()
-}
-
-/// Rotation matrix of a (normalized) w,x,y,z quaternion, row-major.
-fn rotation(q: &[f32]) -> [[f32; 3]; 3] {
-    let n = (q.iter().map(|v| v * v).sum::<f32>()).sqrt().max(1e-12);
-    crate::quat::to_matrix([q[0] / n, q[1] / n, q[2] / n, q[3] / n])
 }
 
 /// Clone small Gaussians and split large ones whose mean view-space gradient reaches the
@@ -84,6 +64,7 @@ pub fn densify_and_prune(
         cloned: clone_idx.len(),
         split: split_idx.len(),
         pruned,
+        ..Default::default()
     }
 }
 
@@ -205,7 +186,8 @@ mod tests {
             DensifyReport {
                 cloned: 3,
                 split: 2,
-                pruned: 3
+                pruned: 3,
+                ..Default::default()
             }
         );
         assert!(st.is_aligned());

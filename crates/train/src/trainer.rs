@@ -100,6 +100,23 @@ impl Trainer {
             }
             _ => crate::init::random(&cfg.init, &mut rng),
         };
+        let mut model = model;
+        if cfg.densify.strategy == crate::densify::Strategy::Mcmc {
+            crate::densify::mcmc::prepare_init(&mut model, &cfg.densify.mcmc);
+        }
+        if cfg.densify.strategy == crate::densify::Strategy::Mcmc
+            && model.len() > cfg.densify.mcmc.cap
+        {
+            // gsplat's MCMC never prunes below the initialization either: the cap then only
+            // stops growth, and relocation keeps the initial count.
+            tracing::warn!(
+                "the initialization holds {} Gaussians, more than [densify.mcmc] cap = {}: \
+                 the run keeps {} and never grows",
+                model.len(),
+                cfg.densify.mcmc.cap,
+                model.len()
+            );
+        }
         let field = DeformField::new(&cfg.field, &mut rng);
         let extent = dataset.scene_extent();
         let mut tr = Self::assemble(cfg, dataset, model, field, rng, extent);

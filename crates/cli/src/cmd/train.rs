@@ -380,3 +380,19 @@ fn write_timings(tr: &Trainer, run: &Path, wall: f64, first: u32) -> Result<()> 
         "num_gaussians": tr.state.len(), "ms_per_iteration": phases});
     scene::io::write_json(&run.join("timings.json"), &v).context("writing timings.json")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::passed_mark;
+
+    #[test]
+    fn a_mark_is_passed_once_in_the_step_that_crosses_it() {
+        let marks = [10.0, 30.0, 60.0];
+        assert_eq!(passed_mark(&marks, 0.0, 599.0), None);
+        assert_eq!(passed_mark(&marks, 599.0, 600.0), Some(10.0));
+        assert_eq!(passed_mark(&marks, 600.0, 601.0), None);
+        // A step (or a resume gap) that crosses two marks keeps one checkpoint, for the later.
+        assert_eq!(passed_mark(&marks, 1700.0, 3700.0), Some(60.0));
+        assert_eq!(passed_mark(&[], 0.0, 1e9), None);
+    }
+}

@@ -377,22 +377,18 @@ mod tests {
         };
         assert!((f64::from(loss) - eval(&st.model)).abs() < 1e-7);
         let h = 1e-3f32;
-        for (i, &g) in dl.iter().enumerate() {
-            let mut p = st.model.clone();
-            p.opacity_logits[i] += h;
-            let mut q = st.model.clone();
-            q.opacity_logits[i] -= h;
-            let fd = (eval(&p) - eval(&q)) / (2.0 * f64::from(h));
-            assert!((fd - f64::from(g)).abs() < 1e-5, "opacity {i}: {fd} {g}");
-        }
-        for (j, &g) in ds.iter().enumerate() {
-            let mut p = st.model.clone();
-            p.log_scales[j] += h;
-            let mut q = st.model.clone();
-            q.log_scales[j] -= h;
-            let fd = (eval(&p) - eval(&q)) / (2.0 * f64::from(h));
-            assert!((fd - f64::from(g)).abs() < 1e-5, "scale {j}: {fd} {g}");
-        }
+        // Central differences of the penalty in one parameter group against its gradient.
+        let check = |name: &str, grads: &[f32], group: fn(&mut GaussianModel) -> &mut [f32]| {
+            for (i, &g) in grads.iter().enumerate() {
+                let (mut p, mut q) = (st.model.clone(), st.model.clone());
+                group(&mut p)[i] += h;
+                group(&mut q)[i] -= h;
+                let fd = (eval(&p) - eval(&q)) / (2.0 * f64::from(h));
+                assert!((fd - f64::from(g)).abs() < 1e-5, "{name} {i}: {fd} {g}");
+            }
+        };
+        check("opacity", &dl, |m| &mut m.opacity_logits);
+        check("scale", &ds, |m| &mut m.log_scales);
     }
 
     #[test]

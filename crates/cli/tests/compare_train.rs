@@ -215,6 +215,34 @@ fn compare_trains_three_runs_and_reports_every_key() {
         assert!(per.as_object().unwrap().contains_key("white-suv"), "{run}");
     }
     older_checkpoints_are_scored_apart(&base);
+    other_splits_are_scored_apart(&base);
+}
+
+/// `eval --split train` writes `metrics_train.json` beside the test split's `metrics.json`
+/// (left as it was), with the mean over the frames inside the training times: for the
+/// training split itself, every frame.
+fn other_splits_are_scored_apart(base: &Path) {
+    let test_path = base.join("eval").join("metrics.json");
+    let test_text = std::fs::read_to_string(&test_path).unwrap();
+    semdynreg(&["eval", base.to_str().unwrap(), "--split", "train"]);
+    let train: Value = serde_json::from_str(
+        &std::fs::read_to_string(base.join("eval").join("metrics_train.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(key(&train, "split").as_str(), Some("train"));
+    let frames = key(&train, "frames").as_array().unwrap().len();
+    assert!(frames > 0);
+    assert_eq!(key(&train, "mean.frames").as_u64(), Some(frames as u64));
+    assert_eq!(
+        key(&train, "covered.mean.frames").as_u64(),
+        Some(frames as u64)
+    );
+    assert_eq!(key(&train, "covered.mean.psnr"), key(&train, "mean.psnr"));
+    assert!(
+        key(&train, "covered.train_time_min").as_f64().unwrap()
+            <= key(&train, "covered.train_time_max").as_f64().unwrap()
+    );
+    assert_eq!(std::fs::read_to_string(&test_path).unwrap(), test_text);
 }
 
 /// `eval --iteration N` scores an older checkpoint (here the fork point, 74) into

@@ -72,6 +72,12 @@ pub struct FieldConfig {
     /// size over time: the field can move and turn them but not shrink them out of view, the
     /// "flip-book" of docs/regularizer.md. δx and δr are unaffected.
     pub deform_scale: bool,
+    /// Deformable-3DGS's time network for D-NeRF scenes (`is_blender`): γ(t) → Linear(·,
+    /// `time_net_width`) → ReLU → Linear(·, `time_net_out`) replaces γ(t) in the field's
+    /// input (`crate::time_net`). 0 = off, γ(t) goes in directly (the official non-D-NeRF
+    /// path). Official: 256 → 30.
+    pub time_net_width: usize,
+    pub time_net_out: usize,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -149,8 +155,12 @@ pub struct LogConfig {
     pub eval_interval: u32,
     pub checkpoint_interval: u32,
     pub log_interval: u32,
-    /// Test frames used by the periodic evaluation (0 = all).
+    /// Frames used by the periodic evaluation (0 = all).
     pub eval_frames: usize,
+    /// Split the periodic evaluation scores: `test` (default), `val` (D-NeRF lego, whose
+    /// released test set is inconsistent with its training set: Deformable-3DGS's README
+    /// says to score val) or `train`.
+    pub eval_split: EvalSplit,
     /// Checkpoints kept on disk (older ones are deleted).
     pub keep_checkpoints: usize,
     /// Also save a checkpoint, kept whatever `keep_checkpoints` says, when the run's wall
@@ -192,7 +202,17 @@ impl Default for InitConfig {
 }
 
 impl FieldConfig {
-    /// Deformable-3DGS's network exactly: 8 × 256, skip after layer 4, on every Gaussian.
+    /// Width of the field's time input: the time network's output, or γ(t) without one.
+    pub fn time_input_dim(&self) -> usize {
+        if self.time_net_width > 0 {
+            self.time_net_out
+        } else {
+            crate::encoding::encoded_dim(1, self.time_freqs)
+        }
+    }
+
+    /// Deformable-3DGS's network for D-NeRF exactly (`is_blender`): 8 × 256, skip after
+    /// layer 4, γ(t) with 6 frequencies through the 256 → 30 time network, on every Gaussian.
     pub fn faithful() -> Self {
         Self {
             depth: 8,
@@ -204,6 +224,8 @@ impl FieldConfig {
             visible_only: false,
             visible_margin: 0.15,
             deform_scale: true,
+            time_net_width: 256,
+            time_net_out: 30,
         }
     }
 }
@@ -217,6 +239,7 @@ impl Default for FieldConfig {
             width: 64,
             skip: 2,
             visible_only: true,
+            time_net_width: 0,
             ..Self::faithful()
         }
     }
@@ -233,7 +256,7 @@ impl Default for LrConfig {
             field_final: 1.6e-6,
             field_max_steps: 40_000,
             sh_dc: 2.5e-3,
-            sh_rest: 2.5e-3 / 20.0,
+            sh_rest: 1.25e-4, // feature_lr / 20, computed in double as the official
             opacity: 0.05,
             scaling: 5e-3,
             rotation: 1e-3,
@@ -280,6 +303,35 @@ impl Default for LossConfig {
     }
 }
 
+/// A data split, as named in configs and on the command line.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EvalSplit {
+    Train,
+    Val,
+    #[default]
+    Test,
+}
+
+impl EvalSplit {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Train => "train",
+            Self::Val => "val",
+            Self::Test => "test",
+        }
+    }
+
+    /// The frames of this split.
+    pub fn frames(self, d: &scene::Dataset) -> &[scene::Frame] {
+        match self {
+            Self::Train => &d.train,
+            Self::Val => &d.val,
+            Self::Test => &d.test,
+        }
+    }
+}
+
 impl Default for LogConfig {
     fn default() -> Self {
         Self {
@@ -287,6 +339,7 @@ impl Default for LogConfig {
             checkpoint_interval: 5000,
             log_interval: 100,
             eval_frames: 0,
+            eval_split: EvalSplit::Test,
             keep_checkpoints: 2,
             checkpoint_minutes: Vec::new(),
         }
@@ -433,8 +486,19 @@ impl TrainConfig {
         }
         // Checked before anything is allocated: a config (or a checkpoint's config.toml)
         // asking for a 10^9-wide field would otherwise abort the process in `Mlp::new`.
-        let in_dim = crate::encoding::encoded_dim(3, f.pos_freqs)
-            + crate::encoding::encoded_dim(1, f.time_freqs);
+        if f.time_net_width > 0 && f.time_net_out == 0 {
+            return Err(TrainError::config(
+                "field.time_net_out",
+                "must be > 0 when field.time_net_width is (0 width turns the time network off)",
+            ));
+        }
+        if f.time_net_width > 4096 || f.time_net_out > 4096 {
+            return Err(TrainError::config(
+                "field.time_net_width/time_net_out",
+                "must be ≤ 4096 (Deformable-3DGS: 256 and 30)",
+            ));
+        }
+        let in_dim = crate::encoding::encoded_dim(3, f.pos_freqs) + f.time_input_dim();
         // An upper bound of `Mlp::new`'s count: (depth + 1) layers of at most
         // (in + width + 1) inputs (skip and bias included) × max(width, head) outputs.
         let params = (f.width.checked_add(in_dim + 1))

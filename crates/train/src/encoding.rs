@@ -45,19 +45,25 @@ pub fn encode_reference(x: &[f32], freqs: usize, out: &mut [f32]) {
     }
 }
 
-/// Encodes the rows `idx` of `means (N·3)` with time `t` into `out` (`idx.len() × width`).
+/// γ(t) with `freqs` frequencies.
+pub fn encode_time(t: f32, freqs: usize) -> Vec<f32> {
+    let mut out = vec![0.0; encoded_dim(1, freqs)];
+    encode_one(&[t], freqs, &mut out);
+    out
+}
+
+/// Encodes the rows `idx` of `means (N·3)` into `out` (`idx.len() × width`), each row
+/// `[γ(mean), t_feat]` with the time features `t_feat` shared by all rows (γ(t), or the
+/// time network's output).
 pub fn encode_rows(
     means: &[f32],
     idx: &[u32],
-    t: f32,
+    t_feat: &[f32],
     pos_freqs: usize,
-    time_freqs: usize,
     out: &mut Vec<f32>,
 ) {
     let px = encoded_dim(3, pos_freqs);
-    let width = px + encoded_dim(1, time_freqs);
-    let mut t_enc = vec![0.0; width - px];
-    encode_one(&[t], time_freqs, &mut t_enc);
+    let width = px + t_feat.len();
     out.resize(idx.len() * width, 0.0);
     out.par_chunks_mut(width * 256)
         .zip(idx.par_chunks(256))
@@ -65,7 +71,7 @@ pub fn encode_rows(
             for (row, &i) in o.chunks_exact_mut(width).zip(ids) {
                 let i = i as usize;
                 encode_one(&means[i * 3..i * 3 + 3], pos_freqs, &mut row[..px]);
-                row[px..].copy_from_slice(&t_enc);
+                row[px..].copy_from_slice(t_feat);
             }
         });
 }
@@ -78,7 +84,7 @@ mod tests {
     fn layout_matches_nerf_embedder() {
         let means = [0.5f32, -1.0, 2.0];
         let mut out = Vec::new();
-        encode_rows(&means, &[0], 0.25, 2, 1, &mut out);
+        encode_rows(&means, &[0], &encode_time(0.25, 1), 2, &mut out);
         assert_eq!(out.len(), 15 + 3);
         assert_eq!(&out[..3], &means);
         assert!((out[3] - 0.5f32.sin()).abs() < 1e-6);
@@ -95,7 +101,7 @@ mod tests {
         let means: Vec<f32> = (0..300).map(|i| (i as f32 * 0.731).sin() * 1.6).collect();
         let idx: Vec<u32> = (0..100).collect();
         let mut out = Vec::new();
-        encode_rows(&means, &idx, 0.7, 10, 6, &mut out);
+        encode_rows(&means, &idx, &encode_time(0.7, 6), 10, &mut out);
         let width = encoded_dim(3, 10) + encoded_dim(1, 6);
         for (i, row) in out.chunks_exact(width).enumerate() {
             for f in 0..10 {

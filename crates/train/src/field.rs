@@ -2,8 +2,9 @@
 //! evaluated on a chosen subset of Gaussians (all, or those that can reach the view).
 
 use crate::config::FieldConfig;
-use crate::encoding::{encode_rows, encoded_dim};
+use crate::encoding::{encode_rows, encode_time, encoded_dim};
 use crate::mlp::{Mlp, MlpCache, PackedRows};
+use crate::time_net::{TimeNet, TimeNetCache};
 use rand::Rng;
 
 /// Outputs of the field head: δx (3), δr (4), δs (3).
@@ -39,7 +40,10 @@ impl DeformOutput {
 #[derive(Clone, Debug)]
 pub struct DeformField {
     pub cfg: FieldConfig,
+    /// The MLP; with a time network, its parameters follow the head in `mlp.params`.
     pub mlp: Mlp,
+    time_net: Option<TimeNet>,
+    time_cache: TimeNetCache,
     cache: MlpCache,
     enc: Vec<f32>,
     d_out: Vec<f32>,
@@ -51,10 +55,23 @@ pub struct DeformField {
 
 impl DeformField {
     pub fn new(cfg: &FieldConfig, rng: &mut impl Rng) -> Self {
-        let in_dim = encoded_dim(3, cfg.pos_freqs) + encoded_dim(1, cfg.time_freqs);
+        let in_dim = encoded_dim(3, cfg.pos_freqs) + cfg.time_input_dim();
+        let mut mlp = Mlp::new(in_dim, cfg.width, cfg.depth, cfg.skip, HEAD, rng);
+        let time_net = (cfg.time_net_width > 0).then(|| {
+            let t_dim = encoded_dim(1, cfg.time_freqs);
+            TimeNet::append(
+                &mut mlp.params,
+                t_dim,
+                cfg.time_net_width,
+                cfg.time_net_out,
+                rng,
+            )
+        });
         Self {
             cfg: cfg.clone(),
-            mlp: Mlp::new(in_dim, cfg.width, cfg.depth, cfg.skip, HEAD, rng),
+            mlp,
+            time_net,
+            time_cache: TimeNetCache::default(),
             cache: MlpCache::default(),
             enc: Vec::new(),
             d_out: Vec::new(),
@@ -70,14 +87,12 @@ impl DeformField {
         out.reset(n);
         self.rows.clear();
         self.rows.extend_from_slice(rows);
-        encode_rows(
-            means,
-            rows,
-            t,
-            self.cfg.pos_freqs,
-            self.cfg.time_freqs,
-            &mut self.enc,
-        );
+        let mut t_feat = encode_time(t, self.cfg.time_freqs);
+        if let Some(net) = &self.time_net {
+            net.forward(&self.mlp.params, &t_feat, &mut self.time_cache);
+            t_feat.clone_from(&self.time_cache.out);
+        }
+        encode_rows(means, rows, &t_feat, self.cfg.pos_freqs, &mut self.enc);
         self.mlp.forward(&self.enc, rows.len(), &mut self.cache);
         for (o, &i) in self.cache.out.chunks_exact(HEAD).zip(rows) {
             let i = i as usize;
@@ -109,6 +124,13 @@ impl DeformField {
             &mut self.packed,
             grad,
         );
+        if let Some(net) = &self.time_net {
+            // Every row shares the time features: their gradient comes from the bias
+            // gradients of the layers that read the input (`Mlp::shared_input_grad`).
+            let px = encoded_dim(3, self.cfg.pos_freqs);
+            let d_feat = self.mlp.shared_input_grad(grad, px..px + net.out);
+            net.backward(&self.mlp.params, &self.time_cache, &d_feat, grad);
+        }
     }
 
     /// Rows the last backward pass back-propagated: those with a nonzero `dL/dδ`.
@@ -126,6 +148,64 @@ impl DeformField {
 mod tests {
     use super::*;
     use rand::SeedableRng;
+
+    /// With the time network on, the gradient of its parameters (through the shared time
+    /// features and both input-reading layers) matches central differences.
+    #[test]
+    fn time_network_gradient_matches_finite_differences() {
+        let cfg = FieldConfig {
+            depth: 3,
+            width: 8,
+            skip: 1,
+            pos_freqs: 2,
+            time_freqs: 2,
+            time_net_width: 6,
+            time_net_out: 4,
+            visible_only: false,
+            ..FieldConfig::default()
+        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        let mut f = DeformField::new(&cfg, &mut rng);
+        let tail = 5 * 6 + 6 + 6 * 4 + 4;
+        let n = 40;
+        let means: Vec<f32> = (0..n * 3).map(|_| rng.gen_range(-1.0..1.0)).collect();
+        let rows: Vec<u32> = (0..n as u32).collect();
+        let mut d = DeformOutput::default();
+        d.reset(n);
+        for v in d.dx.iter_mut().chain(&mut d.dr).chain(&mut d.ds) {
+            *v = rng.gen_range(-1.0..1.0);
+        }
+        let loss = |f: &mut DeformField| {
+            let mut out = DeformOutput::default();
+            f.forward(&means, 0.37, &rows, &mut out);
+            let pairs = [(&out.dx, &d.dx), (&out.dr, &d.dr), (&out.ds, &d.ds)];
+            pairs
+                .iter()
+                .flat_map(|(a, b)| a.iter().zip(b.iter()))
+                .map(|(a, b)| *a as f64 * *b as f64)
+                .sum::<f64>()
+        };
+        loss(&mut f);
+        let mut g = Vec::new();
+        f.backward(&d, &mut g);
+        let p = f.mlp.num_params();
+        assert_eq!(g.len(), p);
+        let (mut diff, mut norm) = (0.0f64, 0.0f64);
+        for (i, &an) in g.iter().enumerate().skip(p - tail) {
+            let p0 = f.mlp.params[i];
+            f.mlp.params[i] = p0 + 1e-3;
+            let lp = loss(&mut f);
+            f.mlp.params[i] = p0 - 1e-3;
+            let lm = loss(&mut f);
+            f.mlp.params[i] = p0;
+            let fd = (lp - lm) / 2e-3;
+            diff += (fd - an as f64).powi(2);
+            norm += fd * fd;
+        }
+        assert!(norm > 0.0);
+        let rel = (diff / norm).sqrt();
+        assert!(rel < 2e-2, "relative gradient error {rel}");
+    }
 
     /// With `deform_scale = false`, δs is zero and a gradient on it changes nothing.
     #[test]

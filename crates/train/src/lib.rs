@@ -33,6 +33,7 @@ pub mod regularizer;
 pub mod render;
 pub mod run;
 pub mod state;
+pub mod time_net;
 pub mod timing;
 pub mod trainer;
 mod visibility;

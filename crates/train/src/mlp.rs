@@ -29,6 +29,8 @@ pub struct Mlp {
     /// Layer after whose output the input is concatenated again (None = no skip).
     pub skip: Option<usize>,
     /// All weights (row-major fan_in × fan_out) and biases, layer after layer, head last.
+    /// A caller may append parameters of its own after the head (the field's time network,
+    /// `crate::time_net`): no layer reads them, and their gradient here is zero.
     pub params: Vec<f32>,
     layers: Vec<Layer>,
 }
@@ -291,6 +293,25 @@ impl Mlp {
         self.backward(p_in, p_dout, p_cache, grad);
     }
 
+    /// dL/d(input column c) for the columns `cols` when every row holds the same value in
+    /// them (the field's time features): `Σ_rows dz·Wᵀ = (Σ_rows dz)·Wᵀ`, and `Σ_rows dz`
+    /// of a layer is its bias gradient. So it is read from `grad` (the last backward's
+    /// result) and the rows of the two layers that see the input (the first and the skip),
+    /// at no cost per row.
+    pub fn shared_input_grad(&self, grad: &[f32], cols: std::ops::Range<usize>) -> Vec<f32> {
+        let mut out = vec![0.0f32; cols.len()];
+        let skip_layer = self.skip.map(|s| s + 1);
+        for l in std::iter::once(0).chain(skip_layer) {
+            let ly = self.layers[l];
+            let gb = &grad[ly.b_off..ly.b_off + ly.fan_out];
+            for (o, c) in out.iter_mut().zip(cols.clone()) {
+                let w = &self.params[ly.w_off + c * ly.fan_out..][..ly.fan_out];
+                *o += w.iter().zip(gb).map(|(a, b)| a * b).sum::<f32>();
+            }
+        }
+        out
+    }
+
     /// `out` = the activations of rows `keep` (ascending) of `cache`, in the chunk-major
     /// layout a forward pass over those rows alone would have written.
     fn gather_acts(&self, cache: &MlpCache, keep: &[usize], out: &mut MlpCache) {
@@ -437,6 +458,38 @@ mod tests {
         }
         let rel = (diff / norm).sqrt();
         assert!(rel < 2e-2, "relative gradient error {rel}");
+    }
+
+    /// The input gradient of columns that hold one value in every row, from the bias
+    /// gradients, against central differences of that shared value.
+    #[test]
+    fn shared_input_grad_matches_finite_differences() {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let (ind, rows) = (6, 700);
+        let mlp = Mlp::new(ind, 12, 4, 1, 3, &mut rng);
+        let mut x: Vec<f32> = (0..rows * ind).map(|_| rng.gen_range(-1.0..1.0)).collect();
+        let shared = [0.3f32, -0.6];
+        for r in x.chunks_exact_mut(ind) {
+            r[4..].copy_from_slice(&shared);
+        }
+        let w: Vec<f32> = (0..rows * 3).map(|_| rng.gen_range(-1.0..1.0)).collect();
+        let mut c = MlpCache::default();
+        mlp.forward(&x, rows, &mut c);
+        let mut g = Vec::new();
+        mlp.backward(&x, &w, &mut c, &mut g);
+        let an = mlp.shared_input_grad(&g, 4..6);
+        for (k, &a) in an.iter().enumerate() {
+            let at = |v: f32| {
+                let mut y = x.clone();
+                y.chunks_exact_mut(ind).for_each(|r| r[4 + k] = v);
+                loss(&mlp, &y, rows, &w)
+            };
+            let fd = (at(shared[k] + 1e-3) - at(shared[k] - 1e-3)) / 2e-3;
+            assert!(
+                (fd - a as f64).abs() < 2e-2 * fd.abs().max(1.0),
+                "column {k}: {fd} vs {a}"
+            );
+        }
     }
 
     /// Zero rows of dL/dout dropped: the gradient equals the full backward's up to

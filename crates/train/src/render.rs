@@ -24,28 +24,102 @@ pub struct FrameMetrics {
     pub time: f32,
     pub psnr: f64,
     pub ssim: f64,
-    /// Present when the caller supplied an LPIPS scorer (`semdynreg eval` with weights).
+    /// LPIPS with AlexNet and with VGG, present when the caller supplied a scorer for
+    /// them (`semdynreg eval` with weights; Deformable-3DGS's table uses VGG).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lpips: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lpips_vgg: Option<f64>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct MeanMetrics {
     pub psnr: f64,
     pub ssim: f64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lpips: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lpips_vgg: Option<f64>,
+    /// Frames averaged.
+    #[serde(default)]
+    pub frames: usize,
 }
 
-/// An extra per-frame image metric (LPIPS), given the render and the ground truth as
+impl MeanMetrics {
+    /// The mean of `frames` (an LPIPS only when every frame has it).
+    pub fn of<'a>(frames: impl IntoIterator<Item = &'a FrameMetrics>) -> Self {
+        let frames: Vec<&FrameMetrics> = frames.into_iter().collect();
+        let n = frames.len().max(1) as f64;
+        let mean = |f: &dyn Fn(&FrameMetrics) -> f64| frames.iter().map(|m| f(m)).sum::<f64>() / n;
+        let opt = |f: &dyn Fn(&FrameMetrics) -> Option<f64>| {
+            frames
+                .iter()
+                .map(|m| f(m))
+                .sum::<Option<f64>>()
+                .map(|s| s / n)
+        };
+        Self {
+            psnr: mean(&|m| m.psnr),
+            ssim: mean(&|m| m.ssim),
+            lpips: opt(&|m| m.lpips),
+            lpips_vgg: opt(&|m| m.lpips_vgg),
+            frames: frames.len(),
+        }
+    }
+}
+
+/// Perceptual scores of one frame, each present when its network was loaded.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PerceptualScores {
+    pub alex: Option<f64>,
+    pub vgg: Option<f64>,
+}
+
+/// Extra per-frame image metrics (LPIPS), given the render and the ground truth as
 /// `H·W·3` RGB in [0, 1] and the size `(w, h)`. Lives outside this crate because its
 /// weights are found and loaded by the caller.
-pub type FrameScorer<'a> = &'a mut dyn FnMut(&[f32], &[f32], usize, usize) -> Result<f64>;
+pub type FrameScorer<'a> =
+    &'a mut dyn FnMut(&[f32], &[f32], usize, usize) -> Result<PerceptualScores>;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EvalReport {
     pub mean: MeanMetrics,
+    /// The mean over the frames whose time lies inside the training frames' time range
+    /// (`[min, max]` of the times trained on): what a deformation field interpolates, as
+    /// opposed to extrapolating before the first or after the last training time. Absent
+    /// when the caller did not give the training times.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covered: Option<CoveredTimes>,
     pub frames: Vec<FrameMetrics>,
+}
+
+/// [`EvalReport::covered`]: the training time range and the mean inside it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CoveredTimes {
+    pub train_time_min: f32,
+    pub train_time_max: f32,
+    pub mean: MeanMetrics,
+}
+
+impl EvalReport {
+    /// Adds [`EvalReport::covered`] for the training times `train_times` (nothing when
+    /// there are none).
+    pub fn with_covered_times(mut self, train_times: impl IntoIterator<Item = f32>) -> Self {
+        let (lo, hi) = train_times
+            .into_iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), t| {
+                (a.min(t), b.max(t))
+            });
+        if lo <= hi {
+            let inside = self.frames.iter().filter(|f| (lo..=hi).contains(&f.time));
+            self.covered = Some(CoveredTimes {
+                train_time_min: lo,
+                train_time_max: hi,
+                mean: MeanMetrics::of(inside),
+            });
+        }
+        self
+    }
 }
 
 impl Renderer {
@@ -124,7 +198,12 @@ impl Renderer {
         let mut ssim_ws = metrics::SsimWorkspace::new();
         for fr in frames {
             let f = field.as_deref_mut();
-            let img = self.render(model, f, objects, &fr.camera, fr.time, background)?;
+            let mut img = self.render(model, f, objects, &fr.camera, fr.time, background)?;
+            // Scored as the image a viewer shows: clamped to [0, 1], as Deformable-3DGS's
+            // `training_report` (`torch.clamp(render, 0, 1)`) and its saved 8-bit renders
+            // do. Unclamped overshoot (likely on a white background) could only lower the
+            // score.
+            img.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
             let gt = fr.image.to_f32();
             if gt.len() != img.len() {
                 return Err(TrainError::Data(format!(
@@ -134,29 +213,21 @@ impl Renderer {
             }
             let (w, h) = (fr.camera.width as usize, fr.camera.height as usize);
             let lp = match lpips.as_mut() {
-                Some(score) => Some(score(&img, &gt, w, h)?),
-                None => None,
+                Some(score) => score(&img, &gt, w, h)?,
+                None => PerceptualScores::default(),
             };
             out.push(FrameMetrics {
                 file_path: fr.file_path.clone(),
                 time: fr.time,
                 psnr: metrics::psnr(&img, &gt),
                 ssim: ssim_ws.ssim(&img, &gt, w, h) as f64,
-                lpips: lp,
+                lpips: lp.alex,
+                lpips_vgg: lp.vgg,
             });
         }
-        let n = out.len().max(1) as f64;
-        let lpips_mean = out
-            .iter()
-            .map(|f| f.lpips)
-            .sum::<Option<f64>>()
-            .map(|s| s / n);
         Ok(EvalReport {
-            mean: MeanMetrics {
-                psnr: out.iter().map(|f| f.psnr).sum::<f64>() / n,
-                ssim: out.iter().map(|f| f.ssim).sum::<f64>() / n,
-                lpips: lpips_mean,
-            },
+            mean: MeanMetrics::of(&out),
+            covered: None,
             frames: out,
         })
     }

@@ -165,11 +165,12 @@ impl Trainer {
         it >= self.cfg.field.warm_up
     }
 
-    /// Metrics on the first `max_frames` test frames (0 = all), with the field applied once
-    /// training has passed the warm-up (before that it is untrained).
+    /// Metrics on the first `max_frames` frames (0 = all) of the split `log.eval_split`,
+    /// with the field applied once training has passed the warm-up (before that it is
+    /// untrained).
     pub fn evaluate_test(&mut self, max_frames: usize) -> Result<crate::render::EvalReport> {
         let active = self.iteration >= self.cfg.field.warm_up;
-        let frames = &self.dataset.test;
+        let frames = self.cfg.log.eval_split.frames(&self.dataset);
         let k = if max_frames == 0 {
             frames.len()
         } else {

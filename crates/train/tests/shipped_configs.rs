@@ -28,3 +28,26 @@ fn the_one_hour_config_selects_mcmc_with_its_cap() {
     assert_eq!(c.densify.strategy, train::densify::Strategy::Mcmc);
     assert_eq!(c.densify.mcmc.cap, 120_000);
 }
+
+/// `configs/deformable-3dgs.toml` is the official protocol: the field is exactly
+/// `FieldConfig::faithful()` (8×256, the is_blender time network, every Gaussian), the
+/// rates and the densification window are our defaults (which follow the official ones),
+/// and only the dead view-space prune is switched off.
+#[test]
+fn the_deformable_3dgs_config_is_the_faithful_protocol() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../configs/deformable-3dgs.toml");
+    let c = TrainConfig::from_toml_file(&path).unwrap();
+    let d = TrainConfig::default();
+    assert_eq!(c.iterations, 40_000);
+    assert_eq!(c.field, train::config::FieldConfig::faithful());
+    assert_eq!(c.lr, d.lr);
+    assert_eq!(c.init, d.init);
+    assert_eq!(c.sh, d.sh);
+    assert_eq!(c.loss, d.loss);
+    assert_eq!(c.densify.strategy, train::densify::Strategy::Adaptive);
+    assert!(c.densify.screen_size >= 1e9);
+    let mut rest = c.densify.clone();
+    rest.screen_size = d.densify.screen_size;
+    assert_eq!(rest, d.densify);
+    assert!(!c.reg.enabled && !c.objects.enabled);
+}

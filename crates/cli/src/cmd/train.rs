@@ -293,15 +293,21 @@ pub fn run(a: Args) -> Result<()> {
             }
             append_jsonl(&log, &line)?;
         }
-        if l.eval_interval > 0 && it % l.eval_interval == 0 && !tr.dataset.test.is_empty() {
+        let split = l.eval_split;
+        if l.eval_interval > 0 && it % l.eval_interval == 0 && !split.frames(&tr.dataset).is_empty()
+        {
             let rep = tr.evaluate_test(l.eval_frames)?;
             pb.println(format!(
-                "[{it}] test PSNR {:.3} SSIM {:.4}",
-                rep.mean.psnr, rep.mean.ssim
+                "[{it}] {} PSNR {:.3} SSIM {:.4}",
+                split.name(),
+                rep.mean.psnr,
+                rep.mean.ssim
             ));
+            // `test_*` names the held-out score whatever the split (`split` says which),
+            // so logs of every run plot the same way.
             append_jsonl(
                 &log,
-                &serde_json::json!({"iteration": it, "test_psnr": rep.mean.psnr, "test_ssim": rep.mean.ssim}),
+                &serde_json::json!({"iteration": it, "test_psnr": rep.mean.psnr, "test_ssim": rep.mean.ssim, "split": split.name()}),
             )?;
         }
         let interrupted = stop.load(Ordering::SeqCst);

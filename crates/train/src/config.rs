@@ -78,6 +78,11 @@ pub struct FieldConfig {
     /// path). Official: 256 → 30.
     pub time_net_width: usize,
     pub time_net_out: usize,
+    /// Factor on the head's PyTorch-default initial weights and bias (1 = Deformable-3DGS).
+    /// With a small field the default head moves every Gaussian by its own ~0.1 units the
+    /// moment the field starts (8×256: a near-uniform ~0.05 shift; docs/fidelity.md,
+    /// "Field start"); 0 starts the field at δ = 0, and it learns from there.
+    pub head_init_scale: f32,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -226,6 +231,7 @@ impl FieldConfig {
             deform_scale: true,
             time_net_width: 256,
             time_net_out: 30,
+            head_init_scale: 1.0,
         }
     }
 }
@@ -511,6 +517,12 @@ impl TrainConfig {
                     "a {}×{} field has over {MAX_FIELD_PARAMS} parameters (the faithful 8×256 has 0.6M)",
                     f.depth, f.width
                 ),
+            ));
+        }
+        if !(f.head_init_scale.is_finite() && f.head_init_scale >= 0.0) {
+            return Err(TrainError::config(
+                "field.head_init_scale",
+                format!("must be finite and ≥ 0, got {}", f.head_init_scale),
             ));
         }
         if !(f.visible_margin.is_finite() && f.visible_margin >= 0.0) {

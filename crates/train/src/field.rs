@@ -57,6 +57,10 @@ impl DeformField {
     pub fn new(cfg: &FieldConfig, rng: &mut impl Rng) -> Self {
         let in_dim = encoded_dim(3, cfg.pos_freqs) + cfg.time_input_dim();
         let mut mlp = Mlp::new(in_dim, cfg.width, cfg.depth, cfg.skip, HEAD, rng);
+        let head = mlp.head_range();
+        mlp.params[head]
+            .iter_mut()
+            .for_each(|p| *p *= cfg.head_init_scale);
         let time_net = (cfg.time_net_width > 0).then(|| {
             let t_dim = encoded_dim(1, cfg.time_freqs);
             TimeNet::append(
@@ -205,6 +209,37 @@ mod tests {
         assert!(norm > 0.0);
         let rel = (diff / norm).sqrt();
         assert!(rel < 2e-2, "relative gradient error {rel}");
+    }
+
+    /// `head_init_scale = 0` starts the field at δ = 0 everywhere, and it still learns:
+    /// the head's weights get a gradient from the (nonzero) hidden activations.
+    #[test]
+    fn a_zero_head_starts_at_no_deformation_and_learns() {
+        let cfg = FieldConfig {
+            depth: 2,
+            width: 16,
+            skip: 0,
+            head_init_scale: 0.0,
+            ..FieldConfig::default()
+        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+        let mut f = DeformField::new(&cfg, &mut rng);
+        let means = [0.1, 0.2, 0.3, -0.4, 0.5, 0.0];
+        let mut out = DeformOutput::default();
+        f.forward(&means, 0.3, &[0, 1], &mut out);
+        assert!(out
+            .dx
+            .iter()
+            .chain(&out.dr)
+            .chain(&out.ds)
+            .all(|&v| v == 0.0));
+        let mut d = DeformOutput::default();
+        d.reset(2);
+        d.dx.fill(0.5);
+        let mut g = Vec::new();
+        f.backward(&d, &mut g);
+        let head = f.mlp.head_range();
+        assert!(g[head].iter().any(|&v| v != 0.0));
     }
 
     /// With `deform_scale = false`, δs is zero and a gradient on it changes nothing.

@@ -127,6 +127,12 @@ impl Mlp {
         self.params.len()
     }
 
+    /// Where the head's weights and bias lie in `params`.
+    pub fn head_range(&self) -> std::ops::Range<usize> {
+        let ly = self.layers[self.depth];
+        ly.w_off..ly.b_off + ly.fan_out
+    }
+
     /// Multiply-adds per row of one forward pass (backward costs about twice this).
     pub fn macs_per_row(&self) -> usize {
         self.layers.iter().map(|l| l.fan_in * l.fan_out).sum()

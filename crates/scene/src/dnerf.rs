@@ -77,11 +77,32 @@ fn load_split(root: &Path, json_path: &Path, opts: &LoadOptions) -> Result<Vec<F
             "neither `camera_angle_x` nor `fl_x` is given",
         ));
     }
+    check_times(json_path, &meta.frames)?;
     meta.frames
         .par_iter()
         .enumerate()
         .map(|(i, f)| load_frame(root, json_path, &meta, i, f, opts))
         .collect()
+}
+
+/// A D-NeRF split gives every frame its `time`, or none (a static Blender scene: every
+/// frame at t = 0, said once). Some with and some without is an error: the missing ones
+/// would silently sit at t = 0.
+fn check_times(json_path: &Path, frames: &[FrameJson]) -> Result<(), SceneError> {
+    match frames.iter().position(|f| f.time.is_none()) {
+        None => Ok(()),
+        Some(_) if frames.iter().all(|f| f.time.is_none()) => {
+            tracing::warn!(
+                "{}: no frame has a `time`: a static scene, every frame at t = 0",
+                json_path.display()
+            );
+            Ok(())
+        }
+        Some(i) => Err(SceneError::invalid(
+            json_path,
+            format!("frame {i} has no `time`, but other frames do"),
+        )),
+    }
 }
 
 fn load_frame(

@@ -180,6 +180,32 @@ fn non_finite_and_singular_matrices_are_named() {
     );
 }
 
+/// Times are all given or all absent (a static scene, t = 0); a split with some missing
+/// is an error naming the file and the frame, not frames silently at t = 0.
+#[test]
+fn times_are_all_or_none() {
+    let dir = tempfile::tempdir().unwrap();
+    fixture(dir.path());
+    let frame = |i: usize, t: Option<f64>| {
+        let mut f = json!({"file_path": format!("./train/r_{i:03}"), "transform_matrix": IDENT});
+        if let Some(t) = t {
+            f["time"] = json!(t);
+        }
+        f
+    };
+    let mixed = json!([frame(0, Some(0.0)), frame(1, None), frame(2, Some(1.0))]);
+    write_split(dir.path(), "train", mixed, json!({}));
+    let e = err_text(dir.path());
+    assert!(
+        e.contains("transforms_train.json") && e.contains("frame 1 has no `time`"),
+        "{e}"
+    );
+    let none = json!([frame(0, None), frame(1, None), frame(2, None)]);
+    write_split(dir.path(), "train", none, json!({}));
+    let d = load_dataset(dir.path(), &LoadOptions::default()).unwrap();
+    assert!(d.train.iter().all(|f| f.time == 0.0));
+}
+
 #[test]
 fn empty_frame_list_is_named() {
     let dir = tempfile::tempdir().unwrap();

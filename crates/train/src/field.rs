@@ -194,20 +194,15 @@ mod tests {
         f.backward(&d, &mut g);
         let p = f.mlp.num_params();
         assert_eq!(g.len(), p);
-        let (mut diff, mut norm) = (0.0f64, 0.0f64);
-        for (i, &an) in g.iter().enumerate().skip(p - tail) {
-            let p0 = f.mlp.params[i];
-            f.mlp.params[i] = p0 + 1e-3;
-            let lp = loss(&mut f);
-            f.mlp.params[i] = p0 - 1e-3;
-            let lm = loss(&mut f);
-            f.mlp.params[i] = p0;
-            let fd = (lp - lm) / 2e-3;
-            diff += (fd - an as f64).powi(2);
-            norm += fd * fd;
-        }
+        let (rel, norm) = crate::fd_check::relative_error(
+            &mut f,
+            |f, i| &mut f.mlp.params[i],
+            loss,
+            &g,
+            p - tail..p,
+            1e-3,
+        );
         assert!(norm > 0.0);
-        let rel = (diff / norm).sqrt();
         assert!(rel < 2e-2, "relative gradient error {rel}");
     }
 

@@ -14,6 +14,8 @@ pub mod deform;
 pub mod densify;
 pub mod encoding;
 mod error;
+#[cfg(test)]
+mod fd_check;
 pub mod field;
 pub mod finite;
 pub mod fork;

@@ -449,20 +449,15 @@ mod tests {
         mlp.forward(&x, rows, &mut c);
         let mut g = Vec::new();
         mlp.backward(&x, &w, &mut c, &mut g);
-        let (mut diff, mut norm) = (0.0f64, 0.0f64);
-        for i in (0..mlp.params.len()).step_by(3) {
-            let p0 = mlp.params[i];
-            let h = 1e-3;
-            mlp.params[i] = p0 + h;
-            let lp = loss(&mlp, &x, rows, &w);
-            mlp.params[i] = p0 - h;
-            let lm = loss(&mlp, &x, rows, &w);
-            mlp.params[i] = p0;
-            let fd = (lp - lm) / (2.0 * h as f64);
-            diff += (fd - g[i] as f64).powi(2);
-            norm += fd * fd;
-        }
-        let rel = (diff / norm).sqrt();
+        let n = mlp.params.len();
+        let (rel, _) = crate::fd_check::relative_error(
+            &mut mlp,
+            |m, i| &mut m.params[i],
+            |m| loss(m, &x, rows, &w),
+            &g,
+            (0..n).step_by(3),
+            1e-3,
+        );
         assert!(rel < 2e-2, "relative gradient error {rel}");
     }
 

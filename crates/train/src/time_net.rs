@@ -146,19 +146,15 @@ mod tests {
         let mut g = vec![0.0; params.len()];
         net.backward(&params, &c, &w, &mut g);
         assert!(g[..5].iter().all(|&v| v == 0.0));
-        let (mut diff, mut norm) = (0.0f64, 0.0f64);
-        for i in 5..params.len() {
-            let p0 = params[i];
-            params[i] = p0 + 1e-3;
-            let lp = loss(&net, &params, &x, &w);
-            params[i] = p0 - 1e-3;
-            let lm = loss(&net, &params, &x, &w);
-            params[i] = p0;
-            let fd = (lp - lm) / 2e-3;
-            diff += (fd - g[i] as f64).powi(2);
-            norm += fd * fd;
-        }
-        let rel = (diff / norm).sqrt();
+        let n = params.len();
+        let (rel, _) = crate::fd_check::relative_error(
+            &mut params,
+            |p, i| &mut p[i],
+            |p| loss(&net, p, &x, &w),
+            &g,
+            5..n,
+            1e-3,
+        );
         assert!(rel < 1e-2, "relative gradient error {rel}");
     }
 }

@@ -639,6 +639,26 @@ mod tests {
         assert!(e.to_string().contains("widht"), "{e}");
     }
 
+    /// The new field keys name themselves when wrong; a bad eval split is a parse error.
+    #[test]
+    fn bad_time_network_head_scale_and_split_are_named() {
+        let err = |f: fn(&mut TrainConfig)| {
+            let mut c = TrainConfig::default();
+            f(&mut c);
+            c.validate().unwrap_err().to_string()
+        };
+        let e = err(|c| (c.field.time_net_width, c.field.time_net_out) = (256, 0));
+        assert!(e.contains("field.time_net_out"), "{e}");
+        let e = err(|c| c.field.time_net_width = 1 << 20);
+        assert!(e.contains("field.time_net_width"), "{e}");
+        let e = err(|c| c.field.head_init_scale = -1.0);
+        assert!(e.contains("field.head_init_scale"), "{e}");
+        let e = toml::from_str::<TrainConfig>("[log]\neval_split = \"dev\"\n").unwrap_err();
+        assert!(e.to_string().contains("dev"), "{e}");
+        let c: TrainConfig = toml::from_str("[log]\neval_split = \"val\"\n").unwrap();
+        assert_eq!(c.log.eval_split, EvalSplit::Val);
+    }
+
     /// Found by the disk-full test: `--iters 5` rescaled `objects.start_iter` to 0.
     #[test]
     fn every_short_schedule_rescales_to_a_valid_config() {

@@ -65,6 +65,20 @@ fn saving(run: &Path, before: &[String]) -> bool {
     partial(run).iter().any(|n| !before.contains(n))
 }
 
+/// The iteration of the newest complete checkpoint in `run` (0 when there is none).
+fn newest_checkpoint(run: &Path) -> u32 {
+    let Ok(rd) = std::fs::read_dir(run.join("checkpoints")) else {
+        return 0;
+    };
+    rd.flatten()
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            name.strip_prefix("iter_")?.parse().ok()
+        })
+        .max()
+        .unwrap_or(0)
+}
+
 /// Fails the test if `child` ended on its own with an error.
 fn check_exit(child: Child) -> bool {
     let out = child.wait_with_output().unwrap();
@@ -81,6 +95,11 @@ fn check_exit(child: Child) -> bool {
 
 /// Runs `run` to the end, killing it `kills` times (random kills within `max_delay` of a
 /// start); returns (kills sent, of which during a save).
+///
+/// The window for random kills halves whenever the run is further along than its share
+/// of the kills sent: the reference timing that set `max_delay` is one noisy sample (a
+/// busy CI machine ran a run to the end after 10 of 16 kills), and a smaller window
+/// still kills at start-up, loading and training alike.
 fn train_with_kills(
     scene: &Path,
     config: &Path,
@@ -90,14 +109,18 @@ fn train_with_kills(
 ) -> (usize, usize) {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(19);
     let (mut sent, mut in_save) = (0, 0);
+    let mut window = max_delay;
     loop {
+        if sent > 0 && newest_checkpoint(run) as usize * (kills + 1) > ITERS as usize * sent {
+            window /= 2;
+        }
         let left_over = partial(run);
         let mut child = start(scene, config, run);
         if sent < kills {
             let t0 = Instant::now();
             // Even kills: at a random moment; odd kills: as soon as a save is seen.
             let during_save = sent % 2 == 1;
-            let delay = max_delay.mul_f64(rng.gen_range(0.0..1.0));
+            let delay = window.mul_f64(rng.gen_range(0.0..1.0));
             let fire = loop {
                 if child.try_wait().unwrap().is_some() {
                     break false;

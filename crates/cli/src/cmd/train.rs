@@ -214,8 +214,16 @@ fn copy_log_until(src: &Path, dst: &Path, last: u32) -> Result<()> {
         return Ok(()); // a run without a log forks without one
     };
     let mut out = String::new();
-    for line in text.lines() {
-        let v: serde_json::Value = serde_json::from_str(line)
+    let lines: Vec<&str> = text.lines().collect();
+    for (i, line) in lines.iter().enumerate() {
+        let parsed = serde_json::from_str::<serde_json::Value>(line);
+        // A kill can cut the line being appended: an unterminated last line that is not
+        // JSON is that line, and it is logged again after the checkpoint anyway.
+        if parsed.is_err() && i + 1 == lines.len() && !text.ends_with('\n') {
+            tracing::warn!("{}: dropped a cut last line: {line}", src.display());
+            break;
+        }
+        let v = parsed
             .with_context(|| format!("{} has a line that is not JSON: {line}", src.display()))?;
         if v["iteration"].as_u64().is_some_and(|i| i <= last as u64) {
             out.push_str(line);
@@ -232,7 +240,11 @@ fn append_jsonl(path: &Path, value: &serde_json::Value) -> Result<()> {
         .append(true)
         .open(path)
         .with_context(|| format!("opening {}", path.display()))?;
-    writeln!(f, "{value}").with_context(|| format!("writing {}", path.display()))
+    // One write of the whole line: `writeln!` on a `File` issues a write per formatted
+    // piece, and a kill between two of them would leave a cut line in the log.
+    let line = format!("{value}\n");
+    f.write_all(line.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 fn progress_bar(tr: &Trainer) -> ProgressBar {
@@ -389,7 +401,23 @@ fn write_timings(tr: &Trainer, run: &Path, wall: f64, first: u32) -> Result<()> 
 
 #[cfg(test)]
 mod tests {
-    use super::passed_mark;
+    use super::{copy_log_until, passed_mark};
+
+    #[test]
+    fn a_log_cut_by_a_kill_resumes_and_a_damaged_log_is_refused() {
+        let tmp = tempfile::tempdir().unwrap();
+        let log = tmp.path().join("metrics.jsonl");
+        std::fs::write(&log, "{\"iteration\":1}\n{\"iteration\":2}\n{\"itera").unwrap();
+        copy_log_until(&log, &log, 1).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(&log).unwrap(),
+            "{\"iteration\":1}\n"
+        );
+        // A bad line that is not the unterminated last one is damage, not a kill.
+        std::fs::write(&log, "{\"iteration\":1}\n{\"itera\n{\"iteration\":2}\n").unwrap();
+        let err = copy_log_until(&log, &log, 2).unwrap_err().to_string();
+        assert!(err.contains("not JSON"), "{err}");
+    }
 
     #[test]
     fn a_mark_is_passed_once_in_the_step_that_crosses_it() {

@@ -166,6 +166,7 @@ mod tests {
             time_net_width: 6,
             time_net_out: 4,
             visible_only: false,
+            head_init_scale: 1.0, // a nonzero δ for the check to see
             ..FieldConfig::default()
         };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
@@ -245,6 +246,7 @@ mod tests {
             width: 16,
             skip: 0,
             deform_scale: false,
+            head_init_scale: 1.0, // a nonzero δ for the check to see
             ..FieldConfig::default()
         };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);

@@ -45,6 +45,7 @@ fn scene() -> Scene {
         skip: 0,
         pos_freqs: 2,
         time_freqs: 2,
+        head_init_scale: 1.0, // a nonzero δ for the check to see
         ..FieldConfig::default()
     };
     let mut field = DeformField::new(&cfg, &mut rng);

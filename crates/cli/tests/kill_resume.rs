@@ -65,18 +65,11 @@ fn saving(run: &Path, before: &[String]) -> bool {
     partial(run).iter().any(|n| !before.contains(n))
 }
 
-/// The iteration of the newest complete checkpoint in `run` (0 when there is none).
+/// The iteration of the newest checkpoint in `run` (0 when there is none, or while a
+/// prune races the listing).
 fn newest_checkpoint(run: &Path) -> u32 {
-    let Ok(rd) = std::fs::read_dir(run.join("checkpoints")) else {
-        return 0;
-    };
-    rd.flatten()
-        .filter_map(|e| {
-            let name = e.file_name().to_string_lossy().into_owned();
-            name.strip_prefix("iter_")?.parse().ok()
-        })
-        .max()
-        .unwrap_or(0)
+    let held = train::checkpoint::iterations(run).unwrap_or_default();
+    held.last().map_or(0, |(it, _)| *it)
 }
 
 /// Fails the test if `child` ended on its own with an error.

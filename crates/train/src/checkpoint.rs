@@ -151,11 +151,7 @@ pub fn save(tr: &Trainer, run: &Path) -> Result<PathBuf> {
         let _ = std::fs::remove_dir_all(&tmp);
         return Err(e);
     }
-    let dst = root.join(&name);
-    if dst.exists() {
-        std::fs::remove_dir_all(&dst).map_err(|e| TrainError::io(&dst, e))?;
-    }
-    std::fs::rename(&tmp, &dst).map_err(|e| TrainError::io(&dst, e))?;
+    let dst = install(&root, &name, &tmp)?;
     atomic_write(&root.join("latest"), name.as_bytes())?;
     let pinned = crate::fork::fork_point(&tr.cfg.reg).map(|i| format!("iter_{i:07}"));
     prune_old(&root, &name, pinned.as_deref(), tr.cfg.log.keep_checkpoints);
@@ -177,8 +173,67 @@ fn write_files(tr: &Trainer, dir: &Path) -> Result<()> {
     )
 }
 
+/// The hidden name a checkpoint folder gets on its way out: `why` is `replaced` (a new save
+/// of the same iteration takes its name) or `pruned`. Every step of a save is then one
+/// atomic rename, and a kill never leaves a half-deleted folder under a visible `iter_N`
+/// name, which [`iterations`], `--fork` and `eval --iteration` would take for a checkpoint.
+fn aside(root: &Path, name: &str, why: &str) -> PathBuf {
+    root.join(format!(".{name}.{why}.tmp"))
+}
+
+/// Renames the finished folder `tmp` to `root/name`. An existing `root/name` (a save of the
+/// same iteration, e.g. a resumed run's last one) is first moved aside and deleted after.
+/// If a kill falls between the two renames, `latest` may name the missing folder:
+/// [`restore_replaced`] puts the old one back.
+fn install(root: &Path, name: &str, tmp: &Path) -> Result<PathBuf> {
+    let dst = root.join(name);
+    let old = aside(root, name, "replaced");
+    let replacing = dst.exists();
+    if replacing {
+        let _ = std::fs::remove_dir_all(&old);
+        std::fs::rename(&dst, &old).map_err(|e| TrainError::io(&dst, e))?;
+    }
+    if let Err(e) = std::fs::rename(tmp, &dst) {
+        if replacing {
+            let _ = std::fs::rename(&old, &dst);
+        }
+        return Err(TrainError::io(&dst, e));
+    }
+    if replacing {
+        if let Err(e) = std::fs::remove_dir_all(&old) {
+            tracing::warn!("could not remove {}: {e}", old.display());
+        }
+    }
+    Ok(dst)
+}
+
+/// Puts `root/name` back from its `replaced` copy when a save was killed between moving it
+/// aside and renaming the new one in. Returns whether `root/name` exists now.
+fn restore_replaced(root: &Path, name: &str) -> bool {
+    let dst = root.join(name);
+    let old = aside(root, name, "replaced");
+    if !dst.exists() && old.is_dir() {
+        match std::fs::rename(&old, &dst) {
+            Ok(()) => tracing::info!(
+                "restored {} (a save of the same iteration was interrupted)",
+                dst.display()
+            ),
+            Err(e) => tracing::warn!("could not restore {}: {e}", dst.display()),
+        }
+    }
+    dst.is_dir()
+}
+
+/// Moves `root/name` aside, then deletes it.
+fn remove_checkpoint_dir(root: &Path, name: &str) -> std::io::Result<()> {
+    let hidden = aside(root, name, "pruned");
+    std::fs::rename(root.join(name), &hidden)?;
+    std::fs::remove_dir_all(&hidden)
+}
+
 /// Removes what an interrupted save left behind: hidden `.iter_*.tmp` folders and
-/// `.latest.tmp-PID` files (one trainer writes a run at a time). Failures only log.
+/// `.latest.tmp-PID` files (one trainer writes a run at a time), except a `replaced`
+/// folder whose checkpoint is missing, which is restored. Failures only log.
 fn remove_partial(root: &Path) {
     let Ok(rd) = std::fs::read_dir(root) else {
         return;
@@ -187,6 +242,14 @@ fn remove_partial(root: &Path) {
         let name = e.file_name().to_string_lossy().into_owned();
         if !(name.starts_with('.') && name.contains(".tmp")) {
             continue;
+        }
+        if let Some(ck) = name
+            .strip_prefix('.')
+            .and_then(|n| n.strip_suffix(".replaced.tmp"))
+        {
+            if !root.join(ck).exists() && restore_replaced(root, ck) {
+                continue;
+            }
         }
         let p = e.path();
         let r = if p.is_dir() {
@@ -215,18 +278,19 @@ fn prune_old(root: &Path, current: &str, pinned: Option<&str>, keep: usize) {
     names.sort();
     let excess = names.len().saturating_sub(keep.max(1));
     for n in names.into_iter().take(excess).filter(|n| n != current) {
-        if let Err(e) = std::fs::remove_dir_all(root.join(&n)) {
+        if let Err(e) = remove_checkpoint_dir(root, &n) {
             tracing::warn!("could not remove old checkpoint {n}: {e}");
         }
     }
 }
 
-/// Folder of the latest checkpoint of a run.
+/// Folder of the latest checkpoint of a run (restoring it first if a save of the same
+/// iteration was killed halfway: [`install`]).
 pub fn latest(run: &Path) -> Result<PathBuf> {
     let p = run.join("checkpoints").join("latest");
     let name = std::fs::read_to_string(&p).map_err(|e| TrainError::io(&p, e))?;
     let dir = run.join("checkpoints").join(name.trim());
-    if !dir.is_dir() {
+    if !restore_replaced(&run.join("checkpoints"), name.trim()) {
         return Err(TrainError::Checkpoint {
             path: p,
             problem: format!("names `{}`, which does not exist", name.trim()),
@@ -597,6 +661,70 @@ pub fn load_trainer(dir: &Path, dataset: scene::Dataset) -> Result<Trainer> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A checkpoint-like folder holding one file with `text`.
+    fn folder(path: &Path, text: &str) {
+        std::fs::create_dir_all(path).unwrap();
+        std::fs::write(path.join("f"), text).unwrap();
+    }
+
+    fn read(path: &Path) -> String {
+        std::fs::read_to_string(path.join("f")).unwrap()
+    }
+
+    fn names(root: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(root)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn a_save_of_the_same_iteration_replaces_the_folder_and_leaves_nothing_hidden() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path();
+        folder(&root.join("iter_0000010"), "old");
+        folder(&root.join(".iter_0000010.tmp"), "new");
+        let dst = install(root, "iter_0000010", &root.join(".iter_0000010.tmp")).unwrap();
+        assert_eq!(read(&dst), "new");
+        assert_eq!(names(root), ["iter_0000010"]);
+        // A first save of an iteration renames only.
+        folder(&root.join(".iter_0000020.tmp"), "b");
+        install(root, "iter_0000020", &root.join(".iter_0000020.tmp")).unwrap();
+        assert_eq!(names(root), ["iter_0000010", "iter_0000020"]);
+    }
+
+    #[test]
+    fn a_save_killed_between_its_renames_is_restored_and_prunes_leave_no_visible_half() {
+        let run = tempfile::tempdir().unwrap();
+        let root = run.path().join("checkpoints");
+        // Killed after moving the old folder aside, before renaming the new one in:
+        // `latest` names a missing folder.
+        folder(&aside(&root, "iter_0000010", "replaced"), "old");
+        folder(&root.join(".iter_0000010.tmp"), "half-written");
+        std::fs::write(root.join("latest"), "iter_0000010").unwrap();
+        let dir = latest(run.path()).unwrap();
+        assert_eq!(read(&dir), "old", "the last complete save is back");
+        // Killed while deleting a pruned folder: only a hidden name is left.
+        folder(&aside(&root, "iter_0000005", "pruned"), "x");
+        // A stale `replaced` copy of a folder that exists is junk.
+        folder(&root.join("iter_0000007"), "new");
+        folder(&aside(&root, "iter_0000007", "replaced"), "old");
+        let its: Vec<u32> = iterations(run.path())
+            .unwrap()
+            .iter()
+            .map(|p| p.0)
+            .collect();
+        assert_eq!(its, [7, 10], "hidden folders are not checkpoints");
+        remove_partial(&root);
+        assert_eq!(names(&root), ["iter_0000007", "iter_0000010", "latest"]);
+        assert_eq!(read(&root.join("iter_0000007")), "new");
+        // Pruning goes through a hidden name too.
+        remove_checkpoint_dir(&root, "iter_0000007").unwrap();
+        assert_eq!(names(&root), ["iter_0000010", "latest"]);
+    }
 
     #[test]
     fn select_finds_a_held_iteration_and_lists_them_otherwise() {

@@ -141,11 +141,24 @@ fn consistency(run: &Path, iteration: Option<u32>, out_dir: &Path) -> Result<()>
     )];
     for (name, o) in v["per_object"].as_object().into_iter().flatten() {
         if let Some(f) = o["follow"].as_f64() {
-            parts.push(format!(
+            let mut part = format!(
                 "{name} follows {:.0} % of its motion (rigidity RMS {:.4})",
                 100.0 * f,
                 num(&o["rigidity_rms"])
-            ));
+            );
+            if let Some(share) = o["node_share"].as_f64() {
+                let pct = |k: &str| {
+                    o[k].as_f64()
+                        .map_or("n/a".into(), |v| format!("{:.0} %", 100.0 * v))
+                };
+                part += &format!(
+                    "; {:.0} % of its group in its node follow {}, the rest {}",
+                    100.0 * share,
+                    pct("follow_in_node"),
+                    pct("follow_outside")
+                );
+            }
+            parts.push(part);
         }
     }
     println!(

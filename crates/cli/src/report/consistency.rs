@@ -64,6 +64,33 @@ pub struct VehicleMetrics {
     pub consistency: ConsistencyReport,
     /// How rigidly they move together, whatever the motion.
     pub rigidity: RigidityReport,
+    /// Runs with rigid objects only: `consistency` again over each group's members split by
+    /// whether they belong to that object's node.
+    pub node_split: Option<NodeSplit>,
+}
+
+/// A vehicle's group is whatever the render at `t_ref` drew inside its ground-truth mask. In
+/// a run with rigid objects that is mostly the object's own Gaussians (placed by its
+/// trajectory), plus background Gaussians the render also drew there: ground seen through
+/// thin or semi-transparent parts and along the silhouette, which stay put. `follow` pools
+/// both, so it reads low whenever the second kind is numerous; this split says which
+/// Gaussians lag.
+pub struct NodeSplit {
+    /// Members whose object column holds the group's object.
+    pub in_node: Option<ConsistencyReport>,
+    /// The other members (the deformable background and other objects).
+    pub outside: Option<ConsistencyReport>,
+    /// Per object: the share of its group's members that are in its node.
+    pub share: Vec<(u8, f64)>,
+}
+
+/// Members of `members` whose `column` entry is (`inside`) or is not `object`.
+fn members_by_node(members: &[u32], column: &[u8], object: u8, inside: bool) -> Vec<u32> {
+    members
+        .iter()
+        .copied()
+        .filter(|&m| (column.get(m as usize) == Some(&object)) == inside)
+        .collect()
 }
 
 /// The metrics for the latest checkpoint of `run` (or iteration's), over its scene's test
@@ -110,22 +137,44 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
     let pose_ref = pose(reference)?;
     let mut acc = ConsistencyAccumulator::new();
     let mut rigidity = RigidityAccumulator::new();
+    let split = !loaded.objects.is_empty();
+    let part = |inside: bool| -> Vec<Vec<u32>> {
+        groups
+            .iter()
+            .map(|g| members_by_node(g.members, &loaded.column, g.object, inside))
+            .collect()
+    };
+    let (in_node, outside) = (part(true), part(false));
+    let (mut acc_in, mut acc_out) = (ConsistencyAccumulator::new(), ConsistencyAccumulator::new());
     for f in &test {
         let pose_t = pose(f)?;
         let deformed = at_time(&loaded, &mut field, f.time);
-        let mut tracks = Vec::new();
-        for g in groups.iter() {
+        let (mut tracks, mut tracks_in, mut tracks_out) = (Vec::new(), Vec::new(), Vec::new());
+        for (k, g) in groups.iter().enumerate() {
             let Some(i) = objects.objects.iter().position(|o| o.id == g.object) else {
                 continue; // an ID in the mask that objects.json does not list
             };
-            tracks.push(ObjectTrack {
+            let track = ObjectTrack {
                 object: g.object,
                 members: g.members,
                 pose_ref: &pose_ref.object_to_world[i],
                 pose_t: &pose_t.object_to_world[i],
+            };
+            tracks_in.push(ObjectTrack {
+                members: &in_node[k],
+                ..track
             });
+            tracks_out.push(ObjectTrack {
+                members: &outside[k],
+                ..track
+            });
+            tracks.push(track);
         }
         acc.add_time(f.time, &tracks, &anchor.means, &deformed.means)?;
+        if split {
+            acc_in.add_time(f.time, &tracks_in, &anchor.means, &deformed.means)?;
+            acc_out.add_time(f.time, &tracks_out, &anchor.means, &deformed.means)?;
+        }
         let attached: Vec<Attached> = tracks
             .iter()
             .map(|t| Attached {
@@ -135,16 +184,27 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
             .collect();
         rigidity.add_time(f.time, &attached, &anchor.means, &deformed.means)?;
     }
+    let node_split = split.then(|| NodeSplit {
+        in_node: acc_in.report().ok(),
+        outside: acc_out.report().ok(),
+        share: groups
+            .iter()
+            .zip(&in_node)
+            .map(|(g, m)| (g.object, m.len() as f64 / g.members.len().max(1) as f64))
+            .collect(),
+    });
     Ok(VehicleMetrics {
         consistency: acc.report()?,
         rigidity: rigidity.report()?,
+        node_split,
     })
 }
 
 /// [`run_consistency`] with object names, as JSON for `semdynreg eval`
 /// (`RUN/eval/consistency.json`): `rms`, `per_time`, `rigidity_rms` (pooled),
 /// `rigidity_per_time`, and per vehicle `rms`, `rms_if_still`, `follow` (`null` for a
-/// vehicle that does not move) and `rigidity_rms`. `None` when the run's scene has no
+/// vehicle that does not move) and `rigidity_rms`; for runs with rigid objects also
+/// `node_share`, `follow_in_node` and `follow_outside` ([`NodeSplit`]). `None` when the run's scene has no
 /// `objects.json` (not a toycars scene).
 pub fn named_consistency(run: &Path, iteration: Option<u32>) -> Result<Option<serde_json::Value>> {
     let info = RunInfo::load(run)?;
@@ -156,7 +216,13 @@ pub fn named_consistency(run: &Path, iteration: Option<u32>) -> Result<Option<se
     let VehicleMetrics {
         consistency: r,
         rigidity,
+        node_split,
     } = run_consistency(run, iteration)?;
+    let follow_in = |rep: &Option<ConsistencyReport>, id: u8| {
+        rep.as_ref()
+            .and_then(|r| r.per_object.iter().find(|o| o.object == id))
+            .and_then(|o| o.follow())
+    };
     let rigid_of = |id: u8| {
         rigidity
             .per_object
@@ -175,8 +241,14 @@ pub fn named_consistency(run: &Path, iteration: Option<u32>) -> Result<Option<se
         .per_object
         .iter()
         .map(|o| {
-            let v = serde_json::json!({"rms": o.rms, "rms_if_still": o.rms_if_still,
+            let mut v = serde_json::json!({"rms": o.rms, "rms_if_still": o.rms_if_still,
                 "follow": o.follow(), "rigidity_rms": rigid_of(o.object)});
+            if let Some(ns) = &node_split {
+                let share = ns.share.iter().find(|s| s.0 == o.object).map(|s| s.1);
+                v["node_share"] = serde_json::json!(share);
+                v["follow_in_node"] = serde_json::json!(follow_in(&ns.in_node, o.object));
+                v["follow_outside"] = serde_json::json!(follow_in(&ns.outside, o.object));
+            }
             (name(o.object), v)
         })
         .collect();
@@ -185,4 +257,21 @@ pub fn named_consistency(run: &Path, iteration: Option<u32>) -> Result<Option<se
         "rigidity_rms": rigidity.rms, "rigidity_per_time": rigidity.per_time,
         "checkpoint": checkpoint::select(run, iteration)?.display().to_string(),
     })))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::members_by_node;
+
+    #[test]
+    fn members_split_by_their_object_column() {
+        let column = [5u8, 255, 5, 7];
+        let members = [0u32, 1, 2, 3];
+        assert_eq!(members_by_node(&members, &column, 5, true), [0, 2]);
+        assert_eq!(members_by_node(&members, &column, 5, false), [1, 3]);
+        assert_eq!(members_by_node(&members, &column, 7, true), [3]);
+        // A run without objects has no column: every member is outside.
+        assert!(members_by_node(&members, &[], 5, true).is_empty());
+        assert_eq!(members_by_node(&members, &[], 5, false), members);
+    }
 }

@@ -153,6 +153,7 @@ fn add_consistency(res: &mut MethodResults, run: &Path, set: &EvalSet, notes: &m
     let Some(VehicleMetrics {
         consistency: r,
         rigidity,
+        ..
     }) = consistency(run, notes)
     else {
         return;

@@ -145,9 +145,53 @@ pub(crate) struct TileOut<'a> {
     pub topk_w: &'a mut [f32],
 }
 
-/// (pixel, Gaussian) pairs a tile job evaluated, and of those the ones with `α ≥ 1/255` at
-/// an unfinished pixel (0 unless [`TileCtx::count_alpha`]).
-pub(crate) type PairCounts = (u64, u64);
+/// (pixel, Gaussian) pairs a tile job evaluated and, only with [`TileCtx::count_alpha`]
+/// (else 0), the diagnostics of [`crate::RasterStats`]: the evaluated pairs with
+/// `α ≥ 1/255` at an unfinished pixel, and the pairs kernels over 4×4 and 8×2 pixel blocks
+/// would evaluate.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct PairCounts {
+    pub pairs: u64,
+    pub alpha: u64,
+    pub block_4x4: u64,
+    pub block_8x2: u64,
+}
+
+impl std::ops::Add for PairCounts {
+    type Output = Self;
+    fn add(self, o: Self) -> Self {
+        Self {
+            pairs: self.pairs + o.pairs,
+            alpha: self.alpha + o.alpha,
+            block_4x4: self.block_4x4 + o.block_4x4,
+            block_8x2: self.block_8x2 + o.block_8x2,
+        }
+    }
+}
+
+/// Which pixel blocks of a tile one Gaussian reaches, for the block-layout estimate of
+/// [`crate::RasterStats::pairs_4x4`]: a row the kernels evaluate marks the blocks whose
+/// columns its chord ([`Splat::chord`]) meets, as [`Splat::reaches_row`] does for a whole
+/// row. `b4` has bit `4·(r/4) + q` for columns `4q..4q+3`; `b8` bit `2·(r/2) + h` for
+/// columns `8h..8h+7`.
+#[derive(Default)]
+struct BlockMarks {
+    b4: u16,
+    b8: u16,
+}
+
+impl BlockMarks {
+    fn mark(&mut self, sp: &Splat, dy: f32, r: usize, x0: f32) {
+        let (lo, hi) = sp.chord(dy);
+        let meets = |c0: usize, c1: usize| hi >= x0 + c0 as f32 + 0.5 && lo <= x0 + c1 as f32 + 0.5;
+        for q in 0..4 {
+            self.b4 |= (meets(4 * q, 4 * q + 3) as u16) << (4 * (r / 4) + q);
+        }
+        for h in 0..2 {
+            self.b8 |= (meets(8 * h, 8 * h + 7) as u16) << (2 * (r / 2) + h);
+        }
+    }
+}
 
 /// A tile's list: depth ranks indexing the splats and, when binning computed them
 /// ([`crate::Cull::Exact`]), each entry's [`Splat::row_mask`] (else empty: the kernels
@@ -282,16 +326,17 @@ fn tile_impl<const TOPK: bool, const COUNT: bool>(
     let mut s = State::new(ctx);
     let px: [f32; TS] = std::array::from_fn(|l| ctx.x0 as f32 + l as f32 + 0.5);
     let mut wrow = [0.0f32; TS];
-    let (mut pairs, mut alpha_pairs) = (0u64, 0u64);
+    let mut n = PairCounts::default();
     for (pos, &rank) in list.ranks.iter().enumerate() {
         let sp = &splats[rank as usize];
         // Rows in increasing order, as a loop over [r0, r1) testing each would visit them.
         let mut todo = list.rows(pos, sp, ctx.x0, ctx.y0) & s.live;
+        let mut blocks = BlockMarks::default();
         while todo != 0 {
             let r = todo.trailing_zeros() as usize;
             todo &= todo - 1;
             let dy = sp.row_dy(ctx.y0, r);
-            pairs += TS as u64;
+            n.pairs += TS as u64;
             let span = r * TS..(r + 1) * TS;
             let row = Row {
                 t: (&mut s.t[span.clone()]).try_into().expect("16"),
@@ -305,7 +350,8 @@ fn tile_impl<const TOPK: bool, const COUNT: bool>(
                 (&mut cb[span.clone()]).try_into().expect("16"),
             ];
             if COUNT {
-                alpha_pairs += count_alpha_row(sp, &px, dy, row.t);
+                n.alpha += count_alpha_row(sp, &px, dy, row.t);
+                blocks.mark(sp, dy, r, ctx.x0 as f32);
             }
             let live = composite_row(sp, &px, dy, pos as u32 + 1, row, cols, &mut wrow);
             if !live {
@@ -323,12 +369,16 @@ fn tile_impl<const TOPK: bool, const COUNT: bool>(
                 }
             }
         }
+        if COUNT {
+            n.block_4x4 += TS as u64 * u64::from(blocks.b4.count_ones());
+            n.block_8x2 += TS as u64 * u64::from(blocks.b8.count_ones());
+        }
         if (pos & 7) == 7 && s.live == 0 {
             break;
         }
     }
     finish(ctx, &s, out);
-    (pairs, alpha_pairs)
+    n
 }
 
 /// Pixels of one row where [`composite_row`] would find `σ ≥ 0`, `α ≥ 1/255` and the pixel

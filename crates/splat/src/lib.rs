@@ -156,6 +156,12 @@ pub struct RasterStats {
     /// only when [`Rasterizer::set_count_alpha_pairs`] is on (a slower, portable
     /// diagnostic kernel with the same arithmetic), else `None`.
     pub alpha_pairs: Option<u64>,
+    /// What kernels evaluating 16-lane blocks of 4×4 (and 8 columns × 2 rows) pixels
+    /// instead of 16-pixel rows would evaluate: 16 × the blocks that an evaluated row's
+    /// chord meets. Measures what such a layout could save (docs/performance.md); counted
+    /// with [`Self::alpha_pairs`], else `None`.
+    pub pairs_4x4: Option<u64>,
+    pub pairs_8x2: Option<u64>,
 }
 
 /// Gradients of a scalar loss with respect to every input of [`Gaussians`], same layouts.

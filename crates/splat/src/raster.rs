@@ -194,8 +194,8 @@ impl Rasterizer {
             .zip(self.tile_tfin.par_chunks_mut(TP))
             .zip(self.tile_last.par_chunks_mut(TP))
             .enumerate();
-        let add = |a: PairCounts, b: PairCounts| (a.0 + b.0, a.1 + b.1);
-        let (pairs, alpha_pairs) = if k == 0 {
+        let add = |a: PairCounts, b: PairCounts| a + b;
+        let n = if k == 0 {
             main.map(|(t, ((color, tfin), last))| {
                 let (topk_ids, topk_w) = (&mut [][..], &mut [][..]);
                 run(
@@ -209,7 +209,7 @@ impl Rasterizer {
                     },
                 )
             })
-            .reduce(|| (0, 0), add)
+            .reduce(PairCounts::default, add)
         } else {
             main.zip(self.tile_topk_ids.par_chunks_mut(TP * k))
                 .zip(self.tile_topk_w.par_chunks_mut(TP * k))
@@ -225,13 +225,15 @@ impl Rasterizer {
                         },
                     )
                 })
-                .reduce(|| (0, 0), add)
+                .reduce(PairCounts::default, add)
         };
         self.stats = RasterStats {
             tile_intersections: self.bins.n_isects() as u64,
             gradient_slots: self.bins.n_slots() as u64,
-            evaluated_pairs: pairs,
-            alpha_pairs: self.count_alpha.then_some(alpha_pairs),
+            evaluated_pairs: n.pairs,
+            alpha_pairs: self.count_alpha.then_some(n.alpha),
+            pairs_4x4: self.count_alpha.then_some(n.block_4x4),
+            pairs_8x2: self.count_alpha.then_some(n.block_8x2),
         };
     }
 

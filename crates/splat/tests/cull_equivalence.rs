@@ -226,6 +226,7 @@ fn alpha_pair_counter() {
     let mut plain = Rasterizer::new();
     let want = plain.forward(&g, &s.cam, &opts).expect("forward");
     assert_eq!(want.stats.alpha_pairs, None);
+    assert_eq!((want.stats.pairs_4x4, want.stats.pairs_8x2), (None, None));
     let want_image = bits(want.image);
     let mut counts = Vec::new();
     for cull in [Cull::Exact, Cull::Box3Sigma] {
@@ -244,7 +245,15 @@ fn alpha_pair_counter() {
         let st = out.stats;
         let a = st.alpha_pairs.expect("counted");
         assert!(a > 0 && a < st.evaluated_pairs, "{cull:?}: {st:?}");
-        counts.push(a);
+        // A block layout evaluates every pixel that passes (its row's chord meets its
+        // block), so it is bounded below by the alpha pairs.
+        let (b4, b8) = (
+            st.pairs_4x4.expect("counted"),
+            st.pairs_8x2.expect("counted"),
+        );
+        assert!(b4 >= a && b8 >= a, "{cull:?}: {st:?}");
+        assert!(b4 % 16 == 0 && b8 % 16 == 0, "whole blocks: {st:?}");
+        counts.push((a, b4, b8));
     }
     assert_eq!(counts[0], counts[1]);
 }

@@ -36,7 +36,7 @@ fn main() {
     // projection, backward projection, backward slots (zeroing + reduction)] over all
     // frames and rounds
     let mut t: Vec<Vec<Vec<f64>>> = vec![vec![Vec::new(); 8]; 2];
-    let mut totals = [[0u64; 4]; 2];
+    let mut totals = [[0u64; 6]; 2];
     let mut renderer = train::render::Renderer::default();
     let step = ds.train.len().div_ceil(frames).max(1);
     for fr in ds.train.iter().step_by(step) {
@@ -87,6 +87,8 @@ fn main() {
                 st.gradient_slots,
                 st.evaluated_pairs,
                 st.alpha_pairs.unwrap_or(0),
+                st.pairs_4x4.unwrap_or(0),
+                st.pairs_8x2.unwrap_or(0),
             ];
             for (a, b) in totals[k].iter_mut().zip(s) {
                 *a += b;
@@ -121,11 +123,15 @@ fn main() {
         println!("{} (t = {:.3}): bit-identical", fr.file_path, fr.time);
     }
     for (k, c) in culls.iter().enumerate() {
-        let [i, s, p, a] = totals[k];
+        let [i, s, p, a, b4, b8] = totals[k];
+        let pct = |x: u64| 100.0 * x as f64 / p.max(1) as f64;
         println!(
             "{c:?}, summed over frames: intersections {i}, gradient slots {s}, evaluated pairs {p}, \
-             alpha >= 1/255 pairs {a} ({:.1} %)",
-            100.0 * a as f64 / p.max(1) as f64
+             alpha >= 1/255 pairs {a} ({:.1} %); a 4x4-block layout would evaluate {b4} \
+             ({:.1} %), 8x2 blocks {b8} ({:.1} %)",
+            pct(a),
+            pct(b4),
+            pct(b8)
         );
     }
     let m: Vec<Vec<f64>> = t

@@ -151,10 +151,12 @@ fn consistency(run: &Path, iteration: Option<u32>, out_dir: &Path) -> Result<()>
                     o[k].as_f64()
                         .map_or("n/a".into(), |v| format!("{:.0} %", 100.0 * v))
                 };
+                // The group mixes the object's node with background drawn inside its mask.
                 part += &format!(
-                    "; {:.0} % of its group in its node follow {}, the rest {}",
+                    " — its own Gaussians ({:.0} % of the group) follow {}, the other {:.0} % {}",
                     100.0 * share,
                     pct("follow_in_node"),
+                    100.0 * (1.0 - share),
                     pct("follow_outside")
                 );
             }

@@ -93,6 +93,67 @@ fn members_by_node(members: &[u32], column: &[u8], object: u8, inside: bool) -> 
         .collect()
 }
 
+/// Feeds a [`NodeSplit`]: each group's members split once, then the same tracks as the
+/// pooled metric over each part.
+struct SplitAccumulator {
+    /// Per group (in `ObjectGroups` order): [members in the node, the others].
+    parts: Vec<[Vec<u32>; 2]>,
+    share: Vec<(u8, f64)>,
+    acc: [ConsistencyAccumulator; 2],
+}
+
+impl SplitAccumulator {
+    fn new(groups: &ObjectGroups, column: &[u8]) -> Self {
+        let parts: Vec<[Vec<u32>; 2]> = groups
+            .iter()
+            .map(|g| {
+                [true, false].map(|inside| members_by_node(g.members, column, g.object, inside))
+            })
+            .collect();
+        let share = groups
+            .iter()
+            .zip(&parts)
+            .map(|(g, p)| (g.object, p[0].len() as f64 / g.members.len().max(1) as f64))
+            .collect();
+        Self {
+            parts,
+            share,
+            acc: Default::default(),
+        }
+    }
+
+    /// `tracks[j]` is the track of group `groups_of[j]`.
+    fn add_time(
+        &mut self,
+        time: f32,
+        (tracks, groups_of): (&[ObjectTrack], &[usize]),
+        anchor: &[f32],
+        deformed: &[f32],
+    ) -> Result<()> {
+        for (side, acc) in self.acc.iter_mut().enumerate() {
+            let sub: Vec<ObjectTrack> = tracks
+                .iter()
+                .zip(groups_of)
+                .map(|(t, &k)| ObjectTrack {
+                    members: &self.parts[k][side],
+                    ..*t
+                })
+                .collect();
+            acc.add_time(time, &sub, anchor, deformed)?;
+        }
+        Ok(())
+    }
+
+    fn finish(self) -> NodeSplit {
+        let [a, b] = self.acc;
+        NodeSplit {
+            in_node: a.report().ok(),
+            outside: b.report().ok(),
+            share: self.share,
+        }
+    }
+}
+
 /// The metrics for the latest checkpoint of `run` (or iteration's), over its scene's test
 /// frames.
 pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetrics> {
@@ -137,43 +198,32 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
     let pose_ref = pose(reference)?;
     let mut acc = ConsistencyAccumulator::new();
     let mut rigidity = RigidityAccumulator::new();
-    let split = !loaded.objects.is_empty();
-    let part = |inside: bool| -> Vec<Vec<u32>> {
-        groups
-            .iter()
-            .map(|g| members_by_node(g.members, &loaded.column, g.object, inside))
-            .collect()
-    };
-    let (in_node, outside) = (part(true), part(false));
-    let (mut acc_in, mut acc_out) = (ConsistencyAccumulator::new(), ConsistencyAccumulator::new());
+    let mut split =
+        (!loaded.objects.is_empty()).then(|| SplitAccumulator::new(&groups, &loaded.column));
     for f in &test {
         let pose_t = pose(f)?;
         let deformed = at_time(&loaded, &mut field, f.time);
-        let (mut tracks, mut tracks_in, mut tracks_out) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut tracks, mut groups_of) = (Vec::new(), Vec::new());
         for (k, g) in groups.iter().enumerate() {
             let Some(i) = objects.objects.iter().position(|o| o.id == g.object) else {
                 continue; // an ID in the mask that objects.json does not list
             };
-            let track = ObjectTrack {
+            tracks.push(ObjectTrack {
                 object: g.object,
                 members: g.members,
                 pose_ref: &pose_ref.object_to_world[i],
                 pose_t: &pose_t.object_to_world[i],
-            };
-            tracks_in.push(ObjectTrack {
-                members: &in_node[k],
-                ..track
             });
-            tracks_out.push(ObjectTrack {
-                members: &outside[k],
-                ..track
-            });
-            tracks.push(track);
+            groups_of.push(k);
         }
         acc.add_time(f.time, &tracks, &anchor.means, &deformed.means)?;
-        if split {
-            acc_in.add_time(f.time, &tracks_in, &anchor.means, &deformed.means)?;
-            acc_out.add_time(f.time, &tracks_out, &anchor.means, &deformed.means)?;
+        if let Some(s) = &mut split {
+            s.add_time(
+                f.time,
+                (&tracks, &groups_of),
+                &anchor.means,
+                &deformed.means,
+            )?;
         }
         let attached: Vec<Attached> = tracks
             .iter()
@@ -184,19 +234,10 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
             .collect();
         rigidity.add_time(f.time, &attached, &anchor.means, &deformed.means)?;
     }
-    let node_split = split.then(|| NodeSplit {
-        in_node: acc_in.report().ok(),
-        outside: acc_out.report().ok(),
-        share: groups
-            .iter()
-            .zip(&in_node)
-            .map(|(g, m)| (g.object, m.len() as f64 / g.members.len().max(1) as f64))
-            .collect(),
-    });
     Ok(VehicleMetrics {
         consistency: acc.report()?,
         rigidity: rigidity.report()?,
-        node_split,
+        node_split: split.map(SplitAccumulator::finish),
     })
 }
 

@@ -8,6 +8,14 @@
 //! (issue 17) in one process: intersections, gradient slots, evaluated pairs and pairs with
 //! α ≥ 1/255 of each, then forward and backward timed alternately (`reps` rounds, each one
 //! forward + backward per culling, order swapped every round), medians and ratios.
+//!
+//! `-- npz PATH [reps]`: forward + backward of a scene in the reference cases' format
+//! (FORMAT.md), median wall time (`scripts/bench_gsplat_cpu.py` runs it beside gsplat).
+//!
+//! `-- proj [a|b|demo|small] [reps]`: the projection and its backward one Gaussian at a time
+//! (the scalar reference) against sixteen at a time, alternated in one process: median
+//! phase times and their ratio (the images and gradients are bit-identical,
+//! tests/bit_identical.rs).
 
 use splat::{Camera, Cull, Gaussians, Gradients, Rasterizer, RenderOptions};
 use std::time::Instant;
@@ -112,6 +120,16 @@ fn probe() {
 /// Forward + backward of reference case 03 (gsplat's PyTorch CPU path: ≈ 0.22 s).
 fn case03(reps: usize) {
     let (case, _) = common::Case::load(common::CASES[2]);
+    let wall = forward_backward(&case, reps);
+    println!(
+        "case 03 forward+backward: {wall:.5} s (median of {reps}); \
+         gsplat PyTorch CPU 0.22 s is {:.0}x that",
+        0.22 / wall
+    );
+}
+
+/// Median wall seconds of one forward + backward of `case` with its loss weights.
+fn forward_backward(case: &common::Case, reps: usize) -> f64 {
     let g = case.gaussians();
     let mut r = Rasterizer::new();
     let mut grads = Gradients::default();
@@ -128,11 +146,7 @@ fn case03(reps: usize) {
         )
         .expect("backward");
     });
-    println!(
-        "case 03 forward+backward: {wall:.5} s (median of {reps}); \
-         gsplat PyTorch CPU 0.22 s is {:.0}x that",
-        0.22 / wall
-    );
+    wall
 }
 
 /// Counts and alternated timings of both cullings on one scene (see the header).
@@ -233,6 +247,61 @@ fn cull(which: &str, reps: usize) {
     }
 }
 
+/// Scalar against 16-lane projection (see the header).
+fn proj(which: &str, reps: usize) {
+    let (n, w, h) = match which {
+        "b" => (500_000, 1440, 1080),
+        // The demo baseline's end state has ~51k Gaussians at 160×120.
+        "demo" => (51_000, 160, 120),
+        "small" => (4_000, 160, 120),
+        _ => (100_000, 800, 800),
+    };
+    let scene = scene_gen::BenchScene::new(7, n, w, h);
+    let g = scene.gaussians();
+    let opts = RenderOptions::default();
+    let dl: Vec<f32> = (0..(w * h * 3) as usize)
+        .map(|i| (i % 7) as f32 / 7.0 - 0.5)
+        .collect();
+    let mut rs = [Rasterizer::new(), Rasterizer::new()];
+    rs[0].set_scalar_projection(true);
+    // [scalar, 16 lanes][forward projection, backward projection]
+    let mut t = [[(); 2].map(|_| Vec::new()), [(); 2].map(|_| Vec::new())];
+    let mut grads = Gradients::default();
+    for rep in 0..reps {
+        for k in [rep % 2, 1 - rep % 2] {
+            let r = &mut rs[k];
+            r.forward(&g, &scene.cam, &opts).expect("forward");
+            t[k][0].push(r.timings().project);
+            r.backward(&g, &scene.cam, &opts, &dl, None, &mut grads)
+                .expect("backward");
+            t[k][1].push(r.timings().project);
+        }
+    }
+    let m = t.map(|v| v.map(median));
+    let visible = rs[1]
+        .forward(&g, &scene.cam, &opts)
+        .expect("forward")
+        .radii
+        .iter()
+        .filter(|r| r[0] > 0)
+        .count();
+    let ms = |v: f64| v * 1e3;
+    println!(
+        "{which}: {n} Gaussians ({visible} visible), {w}x{h}, SIMD {:?}, medians of {reps}\n\
+         scalar:   projection forward {:.2} ms, backward {:.2} ms\n\
+         16 lanes: projection forward {:.2} ms, backward {:.2} ms\n\
+         scalar/16 lanes: forward {:.2}x, backward {:.2}x, both {:.2}x",
+        rs[1].simd(),
+        ms(m[0][0]),
+        ms(m[0][1]),
+        ms(m[1][0]),
+        ms(m[1][1]),
+        m[0][0] / m[1][0],
+        m[0][1] / m[1][1],
+        (m[0][0] + m[0][1]) / (m[1][0] + m[1][1])
+    );
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let reps = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(3);
@@ -240,6 +309,17 @@ fn main() {
         Some("b") => scenario(500_000, 1440, 1080, reps),
         Some("probe") => probe(),
         Some("case03") => case03(reps),
+        Some("npz") => {
+            let path = args.get(2).expect("npz PATH [reps]");
+            let reps = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(21);
+            let case = common::Case::from_npz(std::path::Path::new(path));
+            let wall = forward_backward(&case, reps);
+            println!("forward+backward {wall:.6} s (median of {reps})");
+        }
+        Some("proj") => {
+            let reps = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(21);
+            proj(args.get(2).map_or("a", String::as_str), reps)
+        }
         Some("cull") => {
             let reps = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(5);
             cull(args.get(2).map_or("a", String::as_str), reps)

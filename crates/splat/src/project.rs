@@ -1,5 +1,10 @@
-//! Projection of one 3D Gaussian to the image (gsplat 1.5.3 `_fully_fused_projection`,
-//! pinhole, classic mode) and its vector–Jacobian product.
+//! Projection of 3D Gaussians to the image (gsplat 1.5.3 `_fully_fused_projection`,
+//! pinhole, classic mode), their colour (`_spherical_harmonics`) and the vector–Jacobian
+//! products of both.
+//!
+//! The arithmetic is written once over [`Lane`]: [`project`] and [`project_vjp`] run it on one
+//! Gaussian in `f32` and are the reference; `project_batch.rs` runs the same functions on
+//! sixteen Gaussians at a time ([`crate::lanes::F16`]), where each branch becomes a select.
 //!
 //! Forward: `Σ = (R S)(R S)ᵀ` from the normalized quaternion and linear scales,
 //! `Σc = W Σ Wᵀ`, EWA Jacobian `J` evaluated at the mean clamped to 1.3× the field of view
@@ -7,10 +12,11 @@
 //! `ceil(min(3.33·sqrt(cov2d_ii), 3.33·sqrt(λ_max)))`, culled when behind the near plane,
 //! `det ≤ 0` or the box misses the image.
 
+use crate::lanes::{arr, Lane};
 use crate::sh::{self, Real};
 use crate::{Camera, Colors, Gaussians, RenderOptions};
 
-pub(crate) type M3 = [[f32; 3]; 3];
+pub(crate) type M3<T = f32> = [[T; 3]; 3];
 
 /// Gaussians farther than this are culled (gsplat's default `far_plane`).
 const FAR_PLANE: f32 = 1e10;
@@ -78,13 +84,13 @@ pub(crate) struct Projected {
     pub rgb: [f32; 3],
 }
 
-/// Gradient of the loss w.r.t. one Gaussian's projected quantities.
+/// Gradient of the loss w.r.t. the projected quantities (of one Gaussian, or of 16).
 #[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct ProjGrad {
-    pub mean2d: [f32; 2],
-    pub conic: [f32; 3],
-    pub rgb: [f32; 3],
-    pub opacity: f32,
+pub(crate) struct ProjGrad<T = f32> {
+    pub mean2d: [T; 2],
+    pub conic: [T; 3],
+    pub rgb: [T; 3],
+    pub opacity: T,
 }
 
 /// Mutable gradient slots of one Gaussian.
@@ -96,19 +102,79 @@ pub(crate) struct GaussGradMut<'a> {
     pub color: &'a mut [f32],
 }
 
-fn matmul(a: &M3, b: &M3) -> M3 {
-    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
+/// The parameters of one Gaussian (or of 16) that the projection reads, colour aside.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct GaussIn<T> {
+    pub mean: [T; 3],
+    /// As stored, not normalized.
+    pub quat: [T; 4],
+    /// Linear scales.
+    pub scale: [T; 3],
+    pub logit: T,
 }
 
-fn transpose(a: &M3) -> M3 {
-    std::array::from_fn(|i| std::array::from_fn(|j| a[j][i]))
+impl GaussIn<f32> {
+    pub(crate) fn of(g: &Gaussians, i: usize) -> Self {
+        GaussIn {
+            mean: std::array::from_fn(|a| g.means[3 * i + a]),
+            quat: std::array::from_fn(|a| g.quats[4 * i + a]),
+            scale: std::array::from_fn(|a| g.scales[3 * i + a]),
+            logit: g.opacity_logits[i],
+        }
+    }
 }
 
-fn mat_vec(a: &M3, v: [f32; 3]) -> [f32; 3] {
-    std::array::from_fn(|i| a[i][0] * v[0] + a[i][1] * v[1] + a[i][2] * v[2])
+/// Gradient w.r.t. [`GaussIn`] (the quaternion's through its normalization).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct GaussGrad<T> {
+    pub mean: [T; 3],
+    pub quat: [T; 4],
+    pub scale: [T; 3],
+    pub logit: T,
+}
+
+/// SH coefficients of one Gaussian (or of 16), `[k][channel]`, the first
+/// `num_coeffs(degree)` entries used.
+pub(crate) type ShCoeffs<T> = [[T; 3]; 16];
+
+/// The projection of [`GaussIn`] before culling is applied: every field is computed on every
+/// lane, and the masks say which of them [`project`] keeps.
+pub(crate) struct Proj<T: Lane> {
+    pub depth: T,
+    pub mean2d: [T; 2],
+    pub conic: [T; 3],
+    /// Per-axis radius in pixels, already rounded up.
+    pub radii: [T; 2],
+    pub opacity: T,
+    /// In front of the near plane and before the far one: mean and conic are kept.
+    pub in_range: T::Mask,
+    /// `in_range` and the radius box meets the image: radii, opacity and colour are kept.
+    pub visible: T::Mask,
+}
+
+/// The camera's world-to-camera rotation W, one value per lane.
+#[inline(always)]
+fn cam_rotation<T: Lane>(cam: &CamInfo) -> M3<T> {
+    arr!(i in 3 => arr!(j in 3 => T::splat(cam.w[i][j])))
+}
+
+#[inline(always)]
+fn matmul<T: Real>(a: &M3<T>, b: &M3<T>) -> M3<T> {
+    arr!(i in 3 => arr!(j in 3 => a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j]))
+}
+
+#[inline(always)]
+fn transpose<T: Copy>(a: &M3<T>) -> M3<T> {
+    arr!(i in 3 => arr!(j in 3 => a[j][i]))
+}
+
+#[inline(always)]
+fn mat_vec<T: Real>(a: &M3<T>, v: [T; 3]) -> [T; 3] {
+    arr!(i in 3 => a[i][0] * v[0] + a[i][1] * v[1] + a[i][2] * v[2])
 }
 
 /// Rotation matrix of a unit quaternion (w, x, y, z), as gsplat `_quat_to_rotmat`.
+#[inline(always)]
 pub(crate) fn rotmat<T: Real>(q: [T; 4]) -> [[T; 3]; 3] {
     let [w, x, y, z] = q;
     let (one, two) = (T::c(1.0), T::c(2.0));
@@ -131,136 +197,268 @@ pub(crate) fn rotmat<T: Real>(q: [T; 4]) -> [[T; 3]; 3] {
     ]
 }
 
-fn quat_normalized(g: &Gaussians, i: usize) -> ([f32; 4], f32) {
-    let q: [f32; 4] = g.quats[4 * i..4 * i + 4].try_into().expect("len 4");
-    let n = (q.iter().map(|v| v * v).sum::<f32>()).sqrt().max(1e-12);
-    (q.map(|v| v / n), n)
+#[inline(always)]
+fn sigmoid<T: Lane>(x: T) -> T {
+    let one = T::c(1.0);
+    one / (one + (-x).exp())
 }
 
-/// Σ (world) and the factors it was built from.
-struct Cov3 {
-    r: M3,
-    s: [f32; 3],
-    m: M3,
-    sigma: M3,
+/// Everything the forward pass computes before the 2D covariance is inverted; the backward
+/// pass recomputes it rather than storing it (gsplat does the same).
+struct Geometry<T: Lane> {
+    /// Mean in camera coordinates.
+    p: [T; 3],
+    qn: [T; 4],
+    qlen: T,
+    r: M3<T>,
+    /// `M = R diag(s)`, so `Σ = M Mᵀ`.
+    m: M3<T>,
+    sigma_c: M3<T>,
+    j: [[T; 3]; 2],
+    /// Clamped x/z and y/z, and whether each clamp bound.
+    uc: [T; 2],
+    clamped: [T::Mask; 2],
+    /// `J Σc Jᵀ + eps2d·I` and its determinant (floored at 1e-10).
+    c2: [[T; 2]; 2],
+    det: T,
 }
 
-fn covariance(qn: [f32; 4], s: [f32; 3]) -> Cov3 {
+#[inline(always)]
+fn geometry<T: Lane>(x: &GaussIn<T>, cam: &CamInfo) -> Geometry<T> {
+    let w = cam_rotation(cam);
+    let p = {
+        let v = mat_vec(&w, x.mean);
+        arr!(a in 3 => v[a] + T::splat(cam.t[a]))
+    };
+    let q = x.quat;
+    let qlen = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+        .sqrt()
+        .max(T::c(1e-12));
+    let qn = arr!(k in 4 => q[k] / qlen);
     let r = rotmat(qn);
-    let m: M3 = std::array::from_fn(|i| std::array::from_fn(|j| r[i][j] * s[j]));
+    let m: M3<T> = arr!(i in 3 => arr!(j in 3 => r[i][j] * x.scale[j]));
     let sigma = matmul(&m, &transpose(&m));
-    Cov3 { r, s, m, sigma }
+    let sigma_c = matmul(&matmul(&w, &sigma), &transpose(&w));
+    let (j, uc, clamped) = jacobian(cam, p);
+    let mut c2 = jaj(&j, &sigma_c);
+    c2[0][0] = c2[0][0] + T::splat(cam.eps2d);
+    c2[1][1] = c2[1][1] + T::splat(cam.eps2d);
+    let det = (c2[0][0] * c2[1][1] - c2[0][1] * c2[1][0]).max(T::c(1e-10));
+    Geometry {
+        p,
+        qn,
+        qlen,
+        r,
+        m,
+        sigma_c,
+        j,
+        uc,
+        clamped,
+        c2,
+        det,
+    }
 }
 
 /// The perspective Jacobian at camera point `p` with gsplat's clamping of x/z and y/z.
 /// Returns J and, per axis, the clamped ratio and whether the clamp bound.
-fn jacobian(cam: &CamInfo, p: [f32; 3]) -> ([[f32; 3]; 2], [f32; 2], [bool; 2]) {
+#[inline(always)]
+fn jacobian<T: Lane>(cam: &CamInfo, p: [T; 3]) -> ([[T; 3]; 2], [T; 2], [T::Mask; 2]) {
     let [x, y, z] = p;
+    let lim = arr!(k in 4 => T::splat(cam.lim[k]));
     let (ux, uy) = (x / z, y / z);
-    let ucx = ux.max(cam.lim[0]).min(cam.lim[1]);
-    let ucy = uy.max(cam.lim[2]).min(cam.lim[3]);
+    let ucx = ux.max(lim[0]).min(lim[1]);
+    let ucy = uy.max(lim[2]).min(lim[3]);
     let (tx, ty) = (z * ucx, z * ucy);
     let z2 = z * z;
+    let (fx, fy, zero) = (T::splat(cam.fx), T::splat(cam.fy), T::c(0.0));
     let j = [
-        [cam.fx / z, 0.0, -cam.fx * tx / z2],
-        [0.0, cam.fy / z, -cam.fy * ty / z2],
+        [fx / z, zero, T::splat(-cam.fx) * tx / z2],
+        [zero, fy / z, T::splat(-cam.fy) * ty / z2],
     ];
     // torch.clamp passes the gradient where min ≤ u ≤ max.
     let clamped = [
-        !(ux >= cam.lim[0] && ux <= cam.lim[1]),
-        !(uy >= cam.lim[2] && uy <= cam.lim[3]),
+        !(ux.ge(lim[0]) & ux.le(lim[1])),
+        !(uy.ge(lim[2]) & uy.le(lim[3])),
     ];
     (j, [ucx, ucy], clamped)
 }
 
 /// `J A Jᵀ` for a 2×3 J and symmetric 3×3 A.
-fn jaj(j: &[[f32; 3]; 2], a: &M3) -> [[f32; 2]; 2] {
-    let ja: [[f32; 3]; 2] =
-        std::array::from_fn(|i| std::array::from_fn(|k| (0..3).map(|l| j[i][l] * a[l][k]).sum()));
-    std::array::from_fn(|i| std::array::from_fn(|k| (0..3).map(|l| ja[i][l] * j[k][l]).sum()))
+#[inline(always)]
+fn jaj<T: Real>(j: &[[T; 3]; 2], a: &M3<T>) -> [[T; 2]; 2] {
+    let ja: [[T; 3]; 2] =
+        arr!(i in 2 => arr!(k in 3 => j[i][0] * a[0][k] + j[i][1] * a[1][k] + j[i][2] * a[2][k]));
+    arr!(i in 2 => arr!(k in 2 => ja[i][0] * j[k][0] + ja[i][1] * j[k][1] + ja[i][2] * j[k][2]))
 }
 
-/// Colour of Gaussian `i` and, for SH, the unit view direction and its length.
-fn color(g: &Gaussians, i: usize, cam: &CamInfo, mean: [f32; 3]) -> [f32; 3] {
-    match g.colors {
+/// Projects `x` on every lane; [`Proj`]'s masks say what culling keeps.
+#[inline(always)]
+pub(crate) fn project_lanes<T: Lane>(x: &GaussIn<T>, cam: &CamInfo) -> Proj<T> {
+    let geo = geometry(x, cam);
+    let (p, c2, det) = (geo.p, geo.c2, geo.det);
+    let in_range = p[2].gt(T::splat(cam.near)) & p[2].lt(T::splat(FAR_PLANE));
+    let two = T::c(2.0);
+    let conic = [
+        c2[1][1] / det,
+        -(c2[0][1] + c2[1][0]) / two / det,
+        c2[0][0] / det,
+    ];
+    let mean2d = [
+        T::splat(cam.fx) * p[0] / p[2] + T::splat(cam.cx),
+        T::splat(cam.fy) * p[1] / p[2] + T::splat(cam.cy),
+    ];
+    let b = (c2[0][0] + c2[1][1]) / two;
+    let ext = T::splat(EXTEND);
+    let r1 = ext * (b + (b * b - det).max(T::c(0.01)).sqrt()).sqrt();
+    let rx = (ext * c2[0][0].sqrt()).min(r1).ceil();
+    let ry = (ext * c2[1][1].sqrt()).min(r1).ceil();
+    let [mx, my] = mean2d;
+    let zero = T::c(0.0);
+    let inside = (mx + rx).gt(zero)
+        & (mx - rx).lt(T::splat(cam.width))
+        & (my + ry).gt(zero)
+        & (my - ry).lt(T::splat(cam.height));
+    Proj {
+        depth: p[2],
+        mean2d,
+        conic,
+        radii: [rx, ry],
+        opacity: sigmoid(x.logit),
+        in_range,
+        visible: in_range & inside,
+    }
+}
+
+/// Unit view direction from the camera centre to `mean`, and the distance.
+#[inline(always)]
+fn view_dir<T: Lane>(cam: &CamInfo, mean: [T; 3]) -> ([T; 3], T) {
+    sh::normalize(arr!(a in 3 => mean[a] - T::splat(cam.center[a])))
+}
+
+/// SH colour `max(Σ_k basis_k(dir)·coeff_k + 0.5, 0)` per channel, before the clamp.
+#[inline(always)]
+fn sh_raw<T: Lane>(degree: usize, coeffs: &ShCoeffs<T>, b: &[T; 16]) -> [T; 3] {
+    arr!(c in 3 => {
+        let mut v = b[0] * coeffs[0][c];
+        for k in 1..sh::num_coeffs(degree) {
+            v = v + b[k] * coeffs[k][c];
+        }
+        v + T::c(0.5)
+    })
+}
+
+/// Colour of a Gaussian with SH coefficients `coeffs` at `mean`.
+#[inline(always)]
+pub(crate) fn sh_color<T: Lane>(
+    degree: usize,
+    coeffs: &ShCoeffs<T>,
+    cam: &CamInfo,
+    mean: [T; 3],
+) -> [T; 3] {
+    let (n, _) = view_dir(cam, mean);
+    let mut b = [T::c(0.0); 16];
+    sh::basis(degree, n, &mut b);
+    let raw = sh_raw(degree, coeffs, &b);
+    arr!(c in 3 => raw[c].max(T::c(0.0)))
+}
+
+fn sh_coeffs_of(coeffs: &[f32], num_coeffs: usize, i: usize) -> ShCoeffs<f32> {
+    let base = i * num_coeffs * 3;
+    std::array::from_fn(|k| {
+        std::array::from_fn(|c| {
+            if k < num_coeffs {
+                coeffs[base + 3 * k + c]
+            } else {
+                0.0
+            }
+        })
+    })
+}
+
+/// Projects Gaussian `i` (the reference for `project_batch.rs`). A culled Gaussian has
+/// `radii == [0, 0]`.
+pub(crate) fn project(g: &Gaussians, i: usize, cam: &CamInfo) -> Projected {
+    let x = GaussIn::of(g, i);
+    let pr = project_lanes(&x, cam);
+    let mut out = Projected {
+        depth: pr.depth,
+        ..Default::default()
+    };
+    if !pr.in_range {
+        return out;
+    }
+    out.conic = pr.conic;
+    out.mean2d = pr.mean2d;
+    if !pr.visible {
+        return out;
+    }
+    out.radii = pr.radii.map(|r| r as i32);
+    out.opacity = pr.opacity;
+    out.rgb = match g.colors {
         Colors::Rgb(c) => [c[3 * i], c[3 * i + 1], c[3 * i + 2]],
         Colors::Sh {
             coeffs,
             num_coeffs,
             degree,
-        } => {
-            let d = [
-                mean[0] - cam.center[0],
-                mean[1] - cam.center[1],
-                mean[2] - cam.center[2],
-            ];
-            let (n, _) = sh::normalize(d);
-            let mut b = [0.0f32; 16];
-            sh::basis(degree, n, &mut b);
-            let base = i * num_coeffs * 3;
-            std::array::from_fn(|c| {
-                let v: f32 = (0..sh::num_coeffs(degree))
-                    .map(|k| b[k] * coeffs[base + 3 * k + c])
-                    .sum();
-                (v + 0.5).max(0.0)
-            })
-        }
-    }
-}
-
-fn mean_of(g: &Gaussians, i: usize) -> [f32; 3] {
-    [g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]]
-}
-
-fn scale_of(g: &Gaussians, i: usize) -> [f32; 3] {
-    [g.scales[3 * i], g.scales[3 * i + 1], g.scales[3 * i + 2]]
-}
-
-fn sigmoid(x: f32) -> f32 {
-    1.0 / (1.0 + (-x).exp())
-}
-
-/// Projects Gaussian `i`. A culled Gaussian has `radii == [0, 0]`.
-pub(crate) fn project(g: &Gaussians, i: usize, cam: &CamInfo) -> Projected {
-    let mean = mean_of(g, i);
-    let p = {
-        let v = mat_vec(&cam.w, mean);
-        [v[0] + cam.t[0], v[1] + cam.t[1], v[2] + cam.t[2]]
+        } => sh_color(degree, &sh_coeffs_of(coeffs, num_coeffs, i), cam, x.mean),
     };
-    let mut out = Projected {
-        depth: p[2],
-        ..Default::default()
-    };
-    if !(p[2] > cam.near && p[2] < FAR_PLANE) {
-        return out;
-    }
-    let (qn, _) = quat_normalized(g, i);
-    let cov = covariance(qn, scale_of(g, i));
-    let sigma_c = matmul(&matmul(&cam.w, &cov.sigma), &transpose(&cam.w));
-    let (j, _, _) = jacobian(cam, p);
-    let mut c2 = jaj(&j, &sigma_c);
-    c2[0][0] += cam.eps2d;
-    c2[1][1] += cam.eps2d;
-    let det = (c2[0][0] * c2[1][1] - c2[0][1] * c2[1][0]).max(1e-10);
-    out.conic = [
-        c2[1][1] / det,
-        -(c2[0][1] + c2[1][0]) / 2.0 / det,
-        c2[0][0] / det,
-    ];
-    out.mean2d = [cam.fx * p[0] / p[2] + cam.cx, cam.fy * p[1] / p[2] + cam.cy];
-    let b = (c2[0][0] + c2[1][1]) / 2.0;
-    let r1 = EXTEND * (b + (b * b - det).max(0.01).sqrt()).sqrt();
-    let rx = (EXTEND * c2[0][0].sqrt()).min(r1).ceil();
-    let ry = (EXTEND * c2[1][1].sqrt()).min(r1).ceil();
-    let [mx, my] = out.mean2d;
-    let inside = mx + rx > 0.0 && mx - rx < cam.width && my + ry > 0.0 && my - ry < cam.height;
-    if !inside {
-        return out;
-    }
-    out.radii = [rx as i32, ry as i32];
-    out.opacity = sigmoid(g.opacity_logits[i]);
-    out.rgb = color(g, i, cam, mean);
     out
+}
+
+/// Backward of [`project_lanes`]: the gradient w.r.t. [`GaussIn`], the colour's view
+/// direction term not included (see [`sh_color_vjp`]).
+#[inline(always)]
+pub(crate) fn project_vjp_lanes<T: Lane>(
+    x: &GaussIn<T>,
+    cam: &CamInfo,
+    pg: &ProjGrad<T>,
+) -> GaussGrad<T> {
+    let geo = geometry(x, cam);
+    let (j, c2, det) = (&geo.j, geo.c2, geo.det);
+    let q = [
+        [c2[1][1] / det, -c2[0][1] / det],
+        [-c2[1][0] / det, c2[0][0] / det],
+    ];
+    // conic Q = cov2d⁻¹: dL/dcov2d = −Q G Q with G the symmetric gradient of Q
+    // (the off-diagonal entry b appears once in σ, so it splits in halves).
+    let half_b = T::c(0.5) * pg.conic[1];
+    let gq = [[pg.conic[0], half_b], [half_b, pg.conic[2]]];
+    let qg: [[T; 2]; 2] = arr!(a in 2 => arr!(b in 2 => q[a][0] * gq[0][b] + q[a][1] * gq[1][b]));
+    let h: [[T; 2]; 2] = arr!(a in 2 => arr!(b in 2 => -(qg[a][0] * q[0][b] + qg[a][1] * q[1][b])));
+    // cov2d = J Σc Jᵀ: dΣc = Jᵀ H J, dJ = 2 H J Σc.
+    let g_sigma_c: M3<T> = arr!(a in 3 => arr!(b in 3 => {
+        let row0 = j[0][a] * h[0][0] * j[0][b] + j[0][a] * h[0][1] * j[1][b];
+        let row1 = j[1][a] * h[1][0] * j[0][b] + j[1][a] * h[1][1] * j[1][b];
+        row0 + row1
+    }));
+    let hj: [[T; 3]; 2] = arr!(a in 2 => arr!(b in 3 => h[a][0] * j[0][b] + h[a][1] * j[1][b]));
+    let sc = &geo.sigma_c;
+    let g_j: [[T; 3]; 2] = arr!(a in 2 => arr!(b in 3 =>
+        T::c(2.0) * (hj[a][0] * sc[0][b] + hj[a][1] * sc[1][b] + hj[a][2] * sc[2][b])
+    ));
+    let g_p = camera_point_vjp(cam, &geo, &g_j, pg.mean2d);
+    // Σc = W Σ Wᵀ, Σ = M Mᵀ, M = R diag(s).
+    let w = cam_rotation(cam);
+    let g_sigma = matmul(&matmul(&transpose(&w), &g_sigma_c), &w);
+    let g_m = {
+        let gm = matmul(&g_sigma, &geo.m);
+        arr!(a in 3 => arr!(b in 3 => T::c(2.0) * gm[a][b]))
+    };
+    let r = &geo.r;
+    let scale =
+        arr!(jj in 3 => g_m[0][jj] * r[0][jj] + g_m[1][jj] * r[1][jj] + g_m[2][jj] * r[2][jj]);
+    let g_r: M3<T> = arr!(a in 3 => arr!(b in 3 => g_m[a][b] * x.scale[b]));
+    let qn = geo.qn;
+    let g_qn = rotmat_vjp(qn, &g_r);
+    let dot = qn[0] * g_qn[0] + qn[1] * g_qn[1] + qn[2] * g_qn[2] + qn[3] * g_qn[3];
+    let quat = arr!(k in 4 => (g_qn[k] - qn[k] * dot) / geo.qlen);
+    let o = sigmoid(x.logit);
+    GaussGrad {
+        mean: mat_vec(&transpose(&w), g_p),
+        quat,
+        scale,
+        logit: pg.opacity * o * (T::c(1.0) - o),
+    }
 }
 
 /// Backward of [`project`] for a visible Gaussian: writes (overwrites) its gradients.
@@ -271,172 +469,115 @@ pub(crate) fn project_vjp(
     pg: &ProjGrad,
     out: GaussGradMut,
 ) {
-    let mean = mean_of(g, i);
-    let p = {
-        let v = mat_vec(&cam.w, mean);
-        [v[0] + cam.t[0], v[1] + cam.t[1], v[2] + cam.t[2]]
-    };
-    let (qn, qlen) = quat_normalized(g, i);
-    let cov = covariance(qn, scale_of(g, i));
-    let sigma_c = matmul(&matmul(&cam.w, &cov.sigma), &transpose(&cam.w));
-    let (j, uc, clamped) = jacobian(cam, p);
-    let mut c2 = jaj(&j, &sigma_c);
-    c2[0][0] += cam.eps2d;
-    c2[1][1] += cam.eps2d;
-    let det = (c2[0][0] * c2[1][1] - c2[0][1] * c2[1][0]).max(1e-10);
-    let q = [
-        [c2[1][1] / det, -c2[0][1] / det],
-        [-c2[1][0] / det, c2[0][0] / det],
-    ];
-    // conic Q = cov2d⁻¹: dL/dcov2d = −Q G Q with G the symmetric gradient of Q
-    // (the off-diagonal entry b appears once in σ, so it splits in halves).
-    let gq = [
-        [pg.conic[0], 0.5 * pg.conic[1]],
-        [0.5 * pg.conic[1], pg.conic[2]],
-    ];
-    let qg: [[f32; 2]; 2] =
-        std::array::from_fn(|a| std::array::from_fn(|b| q[a][0] * gq[0][b] + q[a][1] * gq[1][b]));
-    let h: [[f32; 2]; 2] = std::array::from_fn(|a| {
-        std::array::from_fn(|b| -(qg[a][0] * q[0][b] + qg[a][1] * q[1][b]))
-    });
-    // cov2d = J Σc Jᵀ: dΣc = Jᵀ H J, dJ = 2 H J Σc.
-    let g_sigma_c: M3 = std::array::from_fn(|a| {
-        std::array::from_fn(|b| {
-            (0..2)
-                .map(|k| (0..2).map(|l| j[k][a] * h[k][l] * j[l][b]).sum::<f32>())
-                .sum()
-        })
-    });
-    let hj: [[f32; 3]; 2] =
-        std::array::from_fn(|a| std::array::from_fn(|b| h[a][0] * j[0][b] + h[a][1] * j[1][b]));
-    let g_j: [[f32; 3]; 2] = std::array::from_fn(|a| {
-        std::array::from_fn(|b| 2.0 * (0..3).map(|k| hj[a][k] * sigma_c[k][b]).sum::<f32>())
-    });
-    let g_p = camera_point_vjp(cam, p, &g_j, uc, clamped, pg.mean2d);
-    // Σc = W Σ Wᵀ, Σ = M Mᵀ, M = R diag(s).
-    let g_sigma = matmul(&matmul(&transpose(&cam.w), &g_sigma_c), &cam.w);
-    let g_m = matmul(&g_sigma, &cov.m).map(|row| row.map(|v| 2.0 * v));
-    for (jj, gs) in out.scale.iter_mut().enumerate() {
-        *gs = (0..3).map(|ii| g_m[ii][jj] * cov.r[ii][jj]).sum();
+    let x = GaussIn::of(g, i);
+    let mut gg = project_vjp_lanes(&x, cam, pg);
+    match g.colors {
+        Colors::Rgb(_) => out.color.copy_from_slice(&pg.rgb),
+        Colors::Sh {
+            coeffs,
+            num_coeffs,
+            degree,
+        } => {
+            let c = sh_coeffs_of(coeffs, num_coeffs, i);
+            let mut g_c = [[0.0f32; 3]; 16];
+            sh_color_vjp(degree, &c, cam, x.mean, pg.rgb, &mut g_c, &mut gg.mean);
+            out.color.fill(0.0);
+            for (k, gk) in g_c.iter().enumerate().take(sh::num_coeffs(degree)) {
+                out.color[3 * k..3 * k + 3].copy_from_slice(gk);
+            }
+        }
     }
-    let g_r: M3 = std::array::from_fn(|a| std::array::from_fn(|b| g_m[a][b] * cov.s[b]));
-    let g_qn = rotmat_vjp(qn, &g_r);
-    let dot: f32 = (0..4).map(|k| qn[k] * g_qn[k]).sum();
-    for (k, gq) in out.quat.iter_mut().enumerate() {
-        *gq = (g_qn[k] - qn[k] * dot) / qlen;
-    }
-    let mut g_mean = mat_vec(&transpose(&cam.w), g_p);
-    color_vjp(g, i, cam, mean, pg.rgb, out.color, &mut g_mean);
-    out.mean.copy_from_slice(&g_mean);
-    let o = sigmoid(g.opacity_logits[i]);
-    *out.logit = pg.opacity * o * (1.0 - o);
+    out.mean.copy_from_slice(&gg.mean);
+    out.quat.copy_from_slice(&gg.quat);
+    out.scale.copy_from_slice(&gg.scale);
+    *out.logit = gg.logit;
 }
 
 /// Gradient w.r.t. the camera-space mean from the Jacobian's and the 2D mean's gradients.
-fn camera_point_vjp(
+#[inline(always)]
+fn camera_point_vjp<T: Lane>(
     cam: &CamInfo,
-    p: [f32; 3],
-    g_j: &[[f32; 3]; 2],
-    uc: [f32; 2],
-    clamped: [bool; 2],
-    g_m2: [f32; 2],
-) -> [f32; 3] {
-    let [x, y, z] = p;
+    geo: &Geometry<T>,
+    g_j: &[[T; 3]; 2],
+    g_m2: [T; 2],
+) -> [T; 3] {
+    let [x, y, z] = geo.p;
+    let (uc, clamped) = (geo.uc, geo.clamped);
+    let (fx, fy) = (T::splat(cam.fx), T::splat(cam.fy));
+    let (nfx, nfy) = (T::splat(-cam.fx), T::splat(-cam.fy));
     let (z2, z3) = (z * z, z * z * z);
     let (tx, ty) = (z * uc[0], z * uc[1]);
     let mut g = [
-        g_m2[0] * cam.fx / z,
-        g_m2[1] * cam.fy / z,
-        -(g_m2[0] * cam.fx * x + g_m2[1] * cam.fy * y) / z2,
+        g_m2[0] * fx / z,
+        g_m2[1] * fy / z,
+        -(g_m2[0] * fx * x + g_m2[1] * fy * y) / z2,
     ];
-    g[2] += -cam.fx / z2 * g_j[0][0] - cam.fy / z2 * g_j[1][1]
-        + 2.0 * cam.fx * tx / z3 * g_j[0][2]
-        + 2.0 * cam.fy * ty / z3 * g_j[1][2];
-    let g_t = [-cam.fx / z2 * g_j[0][2], -cam.fy / z2 * g_j[1][2]];
+    g[2] = g[2]
+        + (nfx / z2 * g_j[0][0] - fy / z2 * g_j[1][1]
+            + T::splat(2.0 * cam.fx) * tx / z3 * g_j[0][2]
+            + T::splat(2.0 * cam.fy) * ty / z3 * g_j[1][2]);
+    let g_t = [nfx / z2 * g_j[0][2], nfy / z2 * g_j[1][2]];
     // t = z·clamp(u): unclamped t = x (gradient to x only); clamped t = z·bound.
     for a in 0..2 {
-        if clamped[a] {
-            g[2] += g_t[a] * uc[a];
-        } else {
-            g[a] += g_t[a];
-        }
+        g[2] = T::select(clamped[a], g[2] + g_t[a] * uc[a], g[2]);
+        g[a] = T::select(clamped[a], g[a], g[a] + g_t[a]);
     }
     g
 }
 
 /// Gradient w.r.t. the unit quaternion (w, x, y, z) given dL/dR.
-fn rotmat_vjp(q: [f32; 4], gr: &M3) -> [f32; 4] {
+#[inline(always)]
+fn rotmat_vjp<T: Real>(q: [T; 4], gr: &M3<T>) -> [T; 4] {
     let [w, x, y, z] = q;
     let g = gr;
+    let two = T::c(2.0);
     [
-        2.0 * (-z * g[0][1] + y * g[0][2] + z * g[1][0] - x * g[1][2] - y * g[2][0] + x * g[2][1]),
-        2.0 * (y * g[0][1] + z * g[0][2] + y * g[1][0] - 2.0 * x * g[1][1] - w * g[1][2]
+        two * (-z * g[0][1] + y * g[0][2] + z * g[1][0] - x * g[1][2] - y * g[2][0] + x * g[2][1]),
+        two * (y * g[0][1] + z * g[0][2] + y * g[1][0] - two * x * g[1][1] - w * g[1][2]
             + z * g[2][0]
             + w * g[2][1]
-            - 2.0 * x * g[2][2]),
-        2.0 * (-2.0 * y * g[0][0] + x * g[0][1] + w * g[0][2] + x * g[1][0] + z * g[1][2]
+            - two * x * g[2][2]),
+        two * (-two * y * g[0][0] + x * g[0][1] + w * g[0][2] + x * g[1][0] + z * g[1][2]
             - w * g[2][0]
             + z * g[2][1]
-            - 2.0 * y * g[2][2]),
-        2.0 * (-2.0 * z * g[0][0] - w * g[0][1] + x * g[0][2] + w * g[1][0] - 2.0 * z * g[1][1]
+            - two * y * g[2][2]),
+        two * (-two * z * g[0][0] - w * g[0][1] + x * g[0][2] + w * g[1][0] - two * z * g[1][1]
             + y * g[1][2]
             + x * g[2][0]
             + y * g[2][1]),
     ]
 }
 
-/// Colour backward: writes the colour gradient and adds the view-direction term to `g_mean`.
-fn color_vjp(
-    g: &Gaussians,
-    i: usize,
+/// SH colour backward: writes dL/dcoeffs into `g_coeffs` (the first `num_coeffs(degree)`
+/// entries) and adds the view-direction term to `g_mean`.
+#[inline(always)]
+pub(crate) fn sh_color_vjp<T: Lane>(
+    degree: usize,
+    coeffs: &ShCoeffs<T>,
     cam: &CamInfo,
-    mean: [f32; 3],
-    g_rgb: [f32; 3],
-    out: &mut [f32],
-    g_mean: &mut [f32; 3],
+    mean: [T; 3],
+    g_rgb: [T; 3],
+    g_coeffs: &mut ShCoeffs<T>,
+    g_mean: &mut [T; 3],
 ) {
-    let (coeffs, degree) = match g.colors {
-        Colors::Rgb(_) => {
-            out.copy_from_slice(&g_rgb);
-            return;
-        }
-        Colors::Sh {
-            coeffs,
-            num_coeffs,
-            degree,
-        } => (
-            &coeffs[i * num_coeffs * 3..(i + 1) * num_coeffs * 3],
-            degree,
-        ),
-    };
-    let d = [
-        mean[0] - cam.center[0],
-        mean[1] - cam.center[1],
-        mean[2] - cam.center[2],
-    ];
-    let (n, len) = sh::normalize(d);
-    let mut b = [0.0f32; 16];
+    let (n, len) = view_dir(cam, mean);
+    let zero = T::c(0.0);
+    let mut b = [zero; 16];
     sh::basis(degree, n, &mut b);
     let kk = sh::num_coeffs(degree);
     // rgb = max(raw + 0.5, 0): no gradient where the clamp binds (torch clamp_min).
-    let mut gc = g_rgb;
-    for (c, gcc) in gc.iter_mut().enumerate() {
-        let raw: f32 = (0..kk).map(|k| b[k] * coeffs[3 * k + c]).sum::<f32>() + 0.5;
-        if raw < 0.0 {
-            *gcc = 0.0;
-        }
-    }
-    out.fill(0.0);
-    let mut w = [0.0f32; 16];
+    let raw = sh_raw(degree, coeffs, &b);
+    let gc: [T; 3] = arr!(c in 3 => T::select(raw[c].lt(zero), zero, g_rgb[c]));
+    let mut w = [zero; 16];
     for k in 0..kk {
         for c in 0..3 {
-            out[3 * k + c] = b[k] * gc[c];
-            w[k] += coeffs[3 * k + c] * gc[c];
+            g_coeffs[k][c] = b[k] * gc[c];
+            w[k] = w[k] + coeffs[k][c] * gc[c];
         }
     }
     let gn = sh::basis_vjp(degree, n, &w);
     let dot = gn[0] * n[0] + gn[1] * n[1] + gn[2] * n[2];
     for a in 0..3 {
-        g_mean[a] += (gn[a] - n[a] * dot) / len;
+        g_mean[a] = g_mean[a] + (gn[a] - n[a] * dot) / len;
     }
 }

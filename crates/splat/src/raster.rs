@@ -6,6 +6,7 @@ use crate::bin::Bins;
 use crate::forward::{render_tile, PairCounts, Splat, TileCtx, TileOut, TP, TS};
 use crate::grad_slots::{GradSlots, SlotWriter};
 use crate::project::{project, project_vjp, CamInfo, GaussGradMut, ProjGrad, Projected};
+use crate::project_batch::{project_all, project_vjp_all};
 use crate::validate::{validate_backward, validate_forward};
 use crate::{
     Camera, Colors, ForwardOutput, Gaussians, Gradients, RasterStats, RenderOptions, SplatError,
@@ -54,6 +55,8 @@ pub struct Rasterizer {
     shape: Option<(usize, u32, u32)>,
     /// Upper bound on the vector level (None: the widest the CPU has).
     simd_cap: Option<Simd>,
+    /// Project one Gaussian at a time with the scalar reference instead of 16 at a time.
+    scalar_projection: bool,
 }
 
 /// Widest vector level the tile kernels may use on this CPU (detected at run time, so
@@ -111,6 +114,13 @@ impl Rasterizer {
         self.simd_cap = Some(cap);
     }
 
+    /// Runs the projection and its backward one Gaussian at a time with the scalar
+    /// reference (`project.rs`) instead of sixteen at a time (`project_batch.rs`). Results
+    /// are bit-identical; for A/B timings and the tests that say so.
+    pub fn set_scalar_projection(&mut self, on: bool) {
+        self.scalar_projection = on;
+    }
+
     /// The vector level the tile kernels use.
     pub fn simd(&self) -> Simd {
         let detected = simd_level();
@@ -133,15 +143,14 @@ impl Rasterizer {
         let ci = CamInfo::new(cam, opts);
         let n = g.len();
         let t0 = Instant::now();
-        self.proj.clear();
-        self.proj
-            .par_extend((0..n).into_par_iter().map(|i| project(g, i, &ci)));
-        self.radii.clear();
-        self.radii.extend(self.proj.iter().map(|p| p.radii));
-        self.means2d.clear();
-        self.means2d.extend(self.proj.iter().map(|p| p.mean2d));
-        self.depths.clear();
-        self.depths.extend(self.proj.iter().map(|p| p.depth));
+        if self.scalar_projection {
+            self.proj.clear();
+            self.proj
+                .par_extend((0..n).into_par_iter().map(|i| project(g, i, &ci)));
+        } else {
+            project_all(self.simd(), g, &ci, &mut self.proj);
+        }
+        self.split_projections();
         let t1 = Instant::now();
         let size = (cam.width, cam.height);
         let mode = (opts.cull, self.simd());
@@ -172,6 +181,26 @@ impl Rasterizer {
             n_isects: self.bins.n_isects(),
             stats: self.stats,
         })
+    }
+
+    /// Copies the radii, 2D means and depths out of the projections (the forward output's
+    /// per-Gaussian arrays), in parallel: a serial pass over 100k projections cost ~1 ms.
+    fn split_projections(&mut self) {
+        let n = self.proj.len();
+        set_len(&mut self.radii, n, [0; 2]);
+        set_len(&mut self.means2d, n, [0.0; 2]);
+        set_len(&mut self.depths, n, 0.0);
+        const CH: usize = 4096;
+        self.proj
+            .par_chunks(CH)
+            .zip(self.radii.par_chunks_mut(CH))
+            .zip(self.means2d.par_chunks_mut(CH))
+            .zip(self.depths.par_chunks_mut(CH))
+            .for_each(|(((p, r), m), d)| {
+                for (k, p) in p.iter().enumerate() {
+                    (r[k], m[k], d[k]) = (p.radii, p.mean2d, p.depth);
+                }
+            });
     }
 
     fn rasterize(&mut self, cam: &Camera, opts: &RenderOptions) {
@@ -367,7 +396,7 @@ impl Rasterizer {
 
     /// Per-Gaussian sums: each Gaussian adds its tile slots in row-major tile order.
     fn reduce_slots(&mut self, n: usize) {
-        resize(&mut self.proj_grads, n, [0.0; 9]);
+        set_len(&mut self.proj_grads, n, [0.0; 9]);
         let (slots, rank_of, start) = (&self.slots, &self.bins.rank_of, &self.bins.slot_start);
         self.proj_grads
             .par_chunks_mut(4096)
@@ -397,14 +426,18 @@ impl Rasterizer {
             Colors::Sh { num_coeffs, .. } => num_coeffs * 3,
             Colors::Rgb(_) => 3,
         };
-        resize(&mut grads.means, n * 3, 0.0);
-        resize(&mut grads.quats, n * 4, 0.0);
-        resize(&mut grads.scales, n * 3, 0.0);
-        resize(&mut grads.opacity_logits, n, 0.0);
-        resize(&mut grads.colors, n * cstride, 0.0);
-        resize(&mut grads.means2d, n, [0.0; 2]);
+        set_len(&mut grads.means, n * 3, 0.0);
+        set_len(&mut grads.quats, n * 4, 0.0);
+        set_len(&mut grads.scales, n * 3, 0.0);
+        set_len(&mut grads.opacity_logits, n, 0.0);
+        set_len(&mut grads.colors, n * cstride, 0.0);
+        set_len(&mut grads.means2d, n, [0.0; 2]);
         let ci = CamInfo::new(cam, opts);
         let (proj, pgs) = (&self.proj, &self.proj_grads);
+        if !self.scalar_projection {
+            project_vjp_all(self.simd(), g, &ci, (proj, pgs), grads);
+            return;
+        }
         grads
             .means
             .par_chunks_mut(3)
@@ -466,5 +499,13 @@ fn tile_ctx(
 /// Sets `v` to `len` copies of `fill`, reusing its allocation.
 fn resize<T: Clone>(v: &mut Vec<T>, len: usize, fill: T) {
     v.clear();
+    v.resize(len, fill);
+}
+
+/// Sets the length of a buffer whose every entry the caller overwrites: unlike [`resize`]
+/// it does not first zero what is already there (for the gradients of 100k SH-3 Gaussians
+/// that would be 24 MB of writes per backward pass).
+pub(crate) fn set_len<T: Clone>(v: &mut Vec<T>, len: usize, fill: T) {
+    v.truncate(len);
     v.resize(len, fill);
 }

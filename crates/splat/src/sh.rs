@@ -6,6 +6,8 @@
 //! normalized first, so the gradient (projected onto the sphere's tangent plane by the
 //! normalization's backward) is the same.
 
+use crate::lanes::Lane;
+
 /// Largest supported degree.
 pub const MAX_DEGREE: usize = 3;
 
@@ -60,7 +62,7 @@ const C3: [f64; 7] = [
 ];
 
 /// Basis values at unit direction `n` for the first `num_coeffs(degree)` entries of `out`.
-#[inline]
+#[inline(always)]
 pub fn basis<T: Real>(degree: usize, n: [T; 3], out: &mut [T; 16]) {
     let [x, y, z] = n;
     out[0] = T::c(C0);
@@ -94,71 +96,100 @@ pub fn basis<T: Real>(degree: usize, n: [T; 3], out: &mut [T; 16]) {
 }
 
 /// Gradient of `Σ_k w[k]·basis_k(n)` with respect to `n` (not projected onto the sphere).
-pub fn basis_vjp(degree: usize, n: [f32; 3], w: &[f32; 16]) -> [f32; 3] {
+#[inline(always)]
+pub(crate) fn basis_vjp<T: Lane>(degree: usize, n: [T; 3], w: &[T; 16]) -> [T; 3] {
     let [x, y, z] = n;
-    let mut g = [0.0f32; 3];
-    let mut add = |k: usize, d: [f32; 3]| {
-        g[0] += w[k] * d[0];
-        g[1] += w[k] * d[1];
-        g[2] += w[k] * d[2];
-    };
+    let zero = T::c(0.0);
+    let mut g = [zero; 3];
     if degree == 0 {
-        return [0.0; 3];
+        return g;
     }
-    let c1 = C1 as f32;
-    add(1, [0.0, -c1, 0.0]);
-    add(2, [0.0, 0.0, c1]);
-    add(3, [-c1, 0.0, 0.0]);
+    // A function, not a closure: see `lanes::arr`.
+    #[inline(always)]
+    fn add<T: Lane>(g: &mut [T; 3], w: T, d: [T; 3]) {
+        g[0] = g[0] + w * d[0];
+        g[1] = g[1] + w * d[1];
+        g[2] = g[2] + w * d[2];
+    }
+    let c1 = T::c(C1);
+    add(&mut g, w[1], [zero, -c1, zero]);
+    add(&mut g, w[2], [zero, zero, c1]);
+    add(&mut g, w[3], [-c1, zero, zero]);
     if degree >= 2 {
-        let c2 = C2.map(|v| v as f32);
-        add(4, [c2[0] * y, c2[0] * x, 0.0]);
-        add(5, [0.0, c2[1] * z, c2[1] * y]);
-        add(6, [-2.0 * c2[2] * x, -2.0 * c2[2] * y, 4.0 * c2[2] * z]);
-        add(7, [c2[3] * z, 0.0, c2[3] * x]);
-        add(8, [2.0 * c2[4] * x, -2.0 * c2[4] * y, 0.0]);
+        let c2 = [
+            T::c(C2[0]),
+            T::c(C2[1]),
+            T::c(C2[2]),
+            T::c(C2[3]),
+            T::c(C2[4]),
+        ];
+        add(&mut g, w[4], [c2[0] * y, c2[0] * x, zero]);
+        add(&mut g, w[5], [zero, c2[1] * z, c2[1] * y]);
+        let d6 = [
+            T::c(-2.0) * c2[2] * x,
+            T::c(-2.0) * c2[2] * y,
+            T::c(4.0) * c2[2] * z,
+        ];
+        add(&mut g, w[6], d6);
+        add(&mut g, w[7], [c2[3] * z, zero, c2[3] * x]);
+        add(
+            &mut g,
+            w[8],
+            [T::c(2.0) * c2[4] * x, T::c(-2.0) * c2[4] * y, zero],
+        );
     }
     if degree >= 3 {
-        let c3 = C3.map(|v| v as f32);
+        let c3 = [
+            T::c(C3[0]),
+            T::c(C3[1]),
+            T::c(C3[2]),
+            T::c(C3[3]),
+            T::c(C3[4]),
+            T::c(C3[5]),
+            T::c(C3[6]),
+        ];
         let (xx, yy, zz) = (x * x, y * y, z * z);
-        add(9, [c3[0] * 6.0 * x * y, c3[0] * 3.0 * (xx - yy), 0.0]);
-        add(10, [c3[1] * y * z, c3[1] * x * z, c3[1] * x * y]);
-        add(
-            11,
-            [
-                c3[2] * -2.0 * x * y,
-                c3[2] * (4.0 * zz - xx - 3.0 * yy),
-                c3[2] * 8.0 * y * z,
-            ],
-        );
-        add(
-            12,
-            [
-                c3[3] * -6.0 * x * z,
-                c3[3] * -6.0 * y * z,
-                c3[3] * (6.0 * zz - 3.0 * xx - 3.0 * yy),
-            ],
-        );
-        add(
-            13,
-            [
-                c3[4] * (4.0 * zz - 3.0 * xx - yy),
-                c3[4] * -2.0 * x * y,
-                c3[4] * 8.0 * x * z,
-            ],
-        );
-        add(
-            14,
-            [c3[5] * 2.0 * x * z, c3[5] * -2.0 * y * z, c3[5] * (xx - yy)],
-        );
-        add(15, [c3[6] * 3.0 * (xx - yy), c3[6] * -6.0 * x * y, 0.0]);
+        let (two, three, four) = (T::c(2.0), T::c(3.0), T::c(4.0));
+        let (six, eight) = (T::c(6.0), T::c(8.0));
+        let d9 = [c3[0] * six * x * y, c3[0] * three * (xx - yy), zero];
+        add(&mut g, w[9], d9);
+        add(&mut g, w[10], [c3[1] * y * z, c3[1] * x * z, c3[1] * x * y]);
+        let d11 = [
+            c3[2] * T::c(-2.0) * x * y,
+            c3[2] * (four * zz - xx - three * yy),
+            c3[2] * eight * y * z,
+        ];
+        add(&mut g, w[11], d11);
+        let d12 = [
+            c3[3] * T::c(-6.0) * x * z,
+            c3[3] * T::c(-6.0) * y * z,
+            c3[3] * (six * zz - three * xx - three * yy),
+        ];
+        add(&mut g, w[12], d12);
+        let d13 = [
+            c3[4] * (four * zz - three * xx - yy),
+            c3[4] * T::c(-2.0) * x * y,
+            c3[4] * eight * x * z,
+        ];
+        add(&mut g, w[13], d13);
+        let d14 = [
+            c3[5] * two * x * z,
+            c3[5] * T::c(-2.0) * y * z,
+            c3[5] * (xx - yy),
+        ];
+        add(&mut g, w[14], d14);
+        let d15 = [c3[6] * three * (xx - yy), c3[6] * T::c(-6.0) * x * y, zero];
+        add(&mut g, w[15], d15);
     }
     g
 }
 
 /// Normalizes `d` as `torch.nn.functional.normalize` does (divides by max(|d|, 1e-12)).
-#[inline]
-pub fn normalize(d: [f32; 3]) -> ([f32; 3], f32) {
-    let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-12);
+#[inline(always)]
+pub(crate) fn normalize<T: Lane>(d: [T; 3]) -> ([T; 3], T) {
+    let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        .sqrt()
+        .max(T::c(1e-12));
     ([d[0] / len, d[1] / len, d[2] / len], len)
 }
 

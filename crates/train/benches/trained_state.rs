@@ -6,8 +6,12 @@
 //!
 //! ```text
 //! SEMDYNREG_BENCH_RUN=RUN [SEMDYNREG_BENCH_ITERATION=N] [SEMDYNREG_BENCH_STEPS=20] \
-//!     cargo bench -p train --bench trained_state
+//!     [SEMDYNREG_BENCH_AB=projection] cargo bench -p train --bench trained_state
 //! ```
+//!
+//! With `SEMDYNREG_BENCH_AB=projection` the steps alternate between the rasterizer's scalar
+//! projection (one Gaussian at a time, the reference) and its 16-lane one, and the medians
+//! of each are printed side by side (both take `STEPS` steps).
 //!
 //! RUN is a run folder (`semdynreg train … --out RUN`); its latest checkpoint is used unless
 //! an iteration is named. Without `SEMDYNREG_BENCH_RUN` it says what it needs and exits:
@@ -72,36 +76,71 @@ fn main() {
     for _ in 0..3 {
         tr.step().expect("warm-up step");
     }
-    let mut per_phase: Vec<Vec<f64>> = vec![Vec::new(); PHASES.len()];
-    let (mut totals, mut pairs, mut rows) = (Vec::new(), Vec::new(), Vec::new());
-    for _ in 0..steps {
-        let before = tr.timings;
-        tr.step().expect("step");
-        let mut total = 0.0;
-        for (k, v) in per_phase.iter_mut().enumerate() {
-            let ms = (tr.timings.seconds[k] - before.seconds[k]) * 1e3;
-            total += ms;
-            v.push(ms);
+    let ab = match std::env::var("SEMDYNREG_BENCH_AB").ok().as_deref() {
+        None => false,
+        Some("projection") => true,
+        Some(other) => panic!("SEMDYNREG_BENCH_AB={other}: the one A/B switch is `projection`"),
+    };
+    let variants: &[&str] = if ab {
+        &["scalar projection", "16-lane projection"]
+    } else {
+        &["median"]
+    };
+    let mut samples: Vec<Samples> = variants.iter().map(|_| Samples::new()).collect();
+    for step in 0..steps * variants.len() {
+        let v = step % variants.len();
+        if ab {
+            tr.rasterizer_mut().set_scalar_projection(v == 0);
         }
-        totals.push(total);
-        pairs.push(tr.evaluated_pairs() as f64);
-        let evaluated = tr.field.rows().len().max(1) as f64;
-        rows.push(tr.field.rows_with_gradient() as f64 / evaluated);
+        samples[v].take(&mut tr);
     }
     println!("median of {steps} steps (ms):");
-    for (p, v) in PHASES.iter().zip(per_phase) {
-        let m = median(v);
-        if m > 0.0 {
-            println!("  {:<20} {m:9.2}", p.name());
+    let header: String = variants.iter().map(|v| format!("{v:>20}")).collect();
+    println!("  {:<20} {header}", "");
+    let medians: Vec<Vec<f64>> = samples.into_iter().map(Samples::medians).collect();
+    let names = PHASES.iter().map(|p| p.name()).chain(["total"]);
+    for (k, p) in names.enumerate() {
+        if medians.iter().any(|m| m[k] > 0.0) {
+            let cols: String = medians.iter().map(|m| format!("{:20.2}", m[k])).collect();
+            println!("  {p:<20} {cols}");
         }
     }
-    println!("  {:<20} {:9.2}", "total", median(totals));
+    let m = &medians[medians.len() - 1];
     println!(
         "evaluated (pixel, Gaussian) pairs per step: median {:.3} M",
-        median(pairs) / 1e6
+        m[PHASES.len() + 1] / 1e6
     );
     println!(
         "field rows with a nonzero gradient (back-propagated): median {:.1} % of those evaluated",
-        100.0 * median(rows)
+        100.0 * m[PHASES.len() + 2]
     );
+}
+
+/// Per-step measurements of one variant: ms per phase, then the total, the evaluated pairs
+/// and the share of field rows with a gradient.
+struct Samples(Vec<Vec<f64>>);
+
+impl Samples {
+    fn new() -> Self {
+        Samples(vec![Vec::new(); PHASES.len() + 3])
+    }
+
+    fn take(&mut self, tr: &mut train::trainer::Trainer) {
+        let before = tr.timings;
+        tr.step().expect("step");
+        let mut total = 0.0;
+        for k in 0..PHASES.len() {
+            let ms = (tr.timings.seconds[k] - before.seconds[k]) * 1e3;
+            total += ms;
+            self.0[k].push(ms);
+        }
+        self.0[PHASES.len()].push(total);
+        self.0[PHASES.len() + 1].push(tr.evaluated_pairs() as f64);
+        let evaluated = tr.field.rows().len().max(1) as f64;
+        self.0[PHASES.len() + 2].push(tr.field.rows_with_gradient() as f64 / evaluated);
+    }
+
+    fn medians(self) -> Vec<f64> {
+        self.0.into_iter().map(median).collect()
+    }
 }

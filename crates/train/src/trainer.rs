@@ -155,12 +155,18 @@ impl Trainer {
         &self.state.model
     }
 
-    /// Whether the field is applied at 1-based iteration `it` (Deformable-3DGS: from `warm_up`).
     /// (pixel, Gaussian) pairs the rasterizer evaluated in the last forward pass.
     pub fn evaluated_pairs(&self) -> u64 {
         self.ws.raster.evaluated_pairs()
     }
 
+    /// The training steps' rasterizer, for the A/B switches of benchmarks
+    /// (`set_scalar_projection`, `set_simd_cap`; results are bit-identical either way).
+    pub fn rasterizer_mut(&mut self) -> &mut Rasterizer {
+        &mut self.ws.raster
+    }
+
+    /// Whether the field is applied at 1-based iteration `it` (Deformable-3DGS: from `warm_up`).
     pub fn field_active_at(&self, it: u32) -> bool {
         it >= self.cfg.field.warm_up
     }

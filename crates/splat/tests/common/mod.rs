@@ -89,8 +89,14 @@ impl Case {
     /// The case and its expected outputs.
     pub fn load(stem: &str) -> (Case, Npz) {
         let dir = cases_dir();
-        let mut i = Npz::open(&dir.join(format!("{stem}.npz")));
+        let case = Case::from_npz(&dir.join(format!("{stem}.npz")));
         let expected = Npz::open(&dir.join(format!("{stem}.expected.npz")));
+        (case, expected)
+    }
+
+    /// A scene in the reference cases' input format (FORMAT.md), expected outputs aside.
+    pub fn from_npz(path: &Path) -> Case {
+        let mut i = Npz::open(path);
         let (colors, sh) = match i.get("sh") {
             Some((v, shape)) => (
                 f32s(&v),
@@ -116,8 +122,10 @@ impl Case {
             near_plane: i.scalar("near_plane") as f32,
             ..RenderOptions::default()
         };
-        let case = Case {
-            name: stem.to_string(),
+        Case {
+            name: path
+                .file_stem()
+                .map_or(String::new(), |s| s.to_string_lossy().into_owned()),
             means: f32s(&i.req("means")),
             quats: f32s(&i.req("quats")),
             scales: i
@@ -132,8 +140,7 @@ impl Case {
             opts,
             weights: f32s(&i.req("weights")),
             alpha_weights: i.get("alpha_weights").map(|(v, _)| f32s(&v)),
-        };
-        (case, expected)
+        }
     }
 
     pub fn gaussians(&self) -> Gaussians<'_> {

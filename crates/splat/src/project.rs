@@ -93,6 +93,19 @@ pub(crate) struct ProjGrad<T = f32> {
     pub opacity: T,
 }
 
+impl ProjGrad {
+    /// From one Gaussian's sum of its tile gradients (`backward::GradAcc`: 2D mean, conic,
+    /// colour, opacity).
+    pub(crate) fn from_acc(s: &[f32; 9]) -> Self {
+        ProjGrad {
+            mean2d: [s[0], s[1]],
+            conic: [s[2], s[3], s[4]],
+            rgb: [s[5], s[6], s[7]],
+            opacity: s[8],
+        }
+    }
+}
+
 /// Mutable gradient slots of one Gaussian.
 pub(crate) struct GaussGradMut<'a> {
     pub mean: &'a mut [f32],

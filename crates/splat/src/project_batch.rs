@@ -453,12 +453,7 @@ mod tests {
             };
             for i in (0..n).filter(|&i| proj[i].radii[0] > 0) {
                 let s = &pgs[i];
-                let pg = ProjGrad {
-                    mean2d: [s[0], s[1]],
-                    conic: [s[2], s[3], s[4]],
-                    rgb: [s[5], s[6], s[7]],
-                    opacity: s[8],
-                };
+                let pg = ProjGrad::from_acc(s);
                 let out = GaussGradMut {
                     mean: &mut want.means[3 * i..3 * i + 3],
                     quat: &mut want.quats[4 * i..4 * i + 4],

@@ -458,12 +458,7 @@ impl Rasterizer {
                     color.fill(0.0);
                     return;
                 }
-                let pg = ProjGrad {
-                    mean2d: [s[0], s[1]],
-                    conic: [s[2], s[3], s[4]],
-                    rgb: [s[5], s[6], s[7]],
-                    opacity: s[8],
-                };
+                let pg = ProjGrad::from_acc(s);
                 let out = GaussGradMut {
                     mean,
                     quat,

@@ -79,12 +79,17 @@ fn scene() -> (Scene, RenderOptions) {
     (s, opts)
 }
 
-#[test]
-fn all_vector_levels_agree_bit_for_bit() {
-    let levels: Vec<Simd> = [Simd::Portable, Simd::Avx2, Simd::Avx512]
+/// The vector levels this CPU has.
+fn levels() -> Vec<Simd> {
+    [Simd::Portable, Simd::Avx2, Simd::Avx512]
         .into_iter()
         .filter(|&l| l <= simd_level())
-        .collect();
+        .collect()
+}
+
+#[test]
+fn all_vector_levels_agree_bit_for_bit() {
+    let levels = levels();
     eprintln!("levels on this CPU: {levels:?}");
     let (s, opts) = scene();
     let want = run(levels[0], &s, &opts);
@@ -115,10 +120,7 @@ fn thread_count_does_not_change_results() {
 /// point) and a random scene, at every vector level.
 #[test]
 fn batched_projection_equals_the_scalar_reference() {
-    let levels: Vec<Simd> = [Simd::Portable, Simd::Avx2, Simd::Avx512]
-        .into_iter()
-        .filter(|&l| l <= simd_level())
-        .collect();
+    let levels = levels();
     let cases: Vec<Case> = CASES.iter().map(|c| Case::load(c).0).collect();
     let (s, opts) = scene();
     let mut inputs: Vec<(&str, Gaussians, &Camera, RenderOptions)> = cases

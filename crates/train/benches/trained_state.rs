@@ -6,12 +6,15 @@
 //!
 //! ```text
 //! SEMDYNREG_BENCH_RUN=RUN [SEMDYNREG_BENCH_ITERATION=N] [SEMDYNREG_BENCH_STEPS=20] \
-//!     [SEMDYNREG_BENCH_AB=projection] cargo bench -p train --bench trained_state
+//!     [SEMDYNREG_BENCH_AB=projection|field] cargo bench -p train --bench trained_state
 //! ```
 //!
-//! With `SEMDYNREG_BENCH_AB=projection` the steps alternate between the rasterizer's scalar
-//! projection (one Gaussian at a time, the reference) and its 16-lane one, and the medians
-//! of each are printed side by side (both take `STEPS` steps).
+//! `SEMDYNREG_BENCH_AB` makes the steps alternate between a reference path and the fast one,
+//! and prints the medians of each side by side (both take `STEPS` steps):
+//! - `projection`: the rasterizer's scalar projection (one Gaussian at a time) against its
+//!   16-lane one;
+//! - `field`: the field's time features written into every row of the MLP's input (as
+//!   Deformable-3DGS does) against folded once into its biases.
 //!
 //! RUN is a run folder (`semdynreg train … --out RUN`); its latest checkpoint is used unless
 //! an iteration is named. Without `SEMDYNREG_BENCH_RUN` it says what it needs and exits:
@@ -76,21 +79,22 @@ fn main() {
     for _ in 0..3 {
         tr.step().expect("warm-up step");
     }
-    let ab = match std::env::var("SEMDYNREG_BENCH_AB").ok().as_deref() {
-        None => false,
-        Some("projection") => true,
-        Some(other) => panic!("SEMDYNREG_BENCH_AB={other}: the one A/B switch is `projection`"),
-    };
-    let variants: &[&str] = if ab {
-        &["scalar projection", "16-lane projection"]
-    } else {
-        &["median"]
+    let ab = std::env::var("SEMDYNREG_BENCH_AB").ok();
+    let variants: &[&str] = match ab.as_deref() {
+        None => &["median"],
+        Some("projection") => &["scalar projection", "16-lane projection"],
+        Some("field") => &["time per row", "time in the bias"],
+        Some(other) => {
+            panic!("SEMDYNREG_BENCH_AB={other}: the A/B switches are `projection`, `field`")
+        }
     };
     let mut samples: Vec<Samples> = variants.iter().map(|_| Samples::new()).collect();
     for step in 0..steps * variants.len() {
         let v = step % variants.len();
-        if ab {
-            tr.rasterizer_mut().set_scalar_projection(v == 0);
+        match ab.as_deref() {
+            Some("projection") => tr.rasterizer_mut().set_scalar_projection(v == 0),
+            Some("field") => tr.field.set_time_per_row(v == 0),
+            _ => {}
         }
         samples[v].take(&mut tr);
     }

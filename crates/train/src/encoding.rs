@@ -1,6 +1,8 @@
 //! NeRF positional encoding as in Deformable-3DGS's `get_embedder` (include_input, log
 //! sampling): `[x, sin(2⁰x), cos(2⁰x), …, sin(2^(L−1)x), cos(2^(L−1)x)]`, each term
-//! vector-valued. The field's input is `[γ(mean), γ(t)]`.
+//! vector-valued. The field's input is `[γ(mean), γ(t)]`; γ(t) is the same in every row, so
+//! the field normally passes it to the MLP once (`Mlp::forward`'s shared columns) and
+//! encodes only γ(mean) per row.
 
 use rayon::prelude::*;
 
@@ -53,8 +55,8 @@ pub fn encode_time(t: f32, freqs: usize) -> Vec<f32> {
 }
 
 /// Encodes the rows `idx` of `means (N·3)` into `out` (`idx.len() × width`), each row
-/// `[γ(mean), t_feat]` with the time features `t_feat` shared by all rows (γ(t), or the
-/// time network's output).
+/// `[γ(mean), t_feat]` with the time features `t_feat` repeated in every row (γ(t), or the
+/// time network's output; empty when the MLP takes them as shared columns).
 pub fn encode_rows(
     means: &[f32],
     idx: &[u32],

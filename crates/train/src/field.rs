@@ -51,6 +51,9 @@ pub struct DeformField {
     rows: Vec<u32>,
     /// Scratch of the backward over the rows that received a gradient.
     packed: PackedRows,
+    /// Reference path: the time features written into every row of the MLP's input
+    /// instead of folded into the biases (`set_time_per_row`).
+    time_per_row: bool,
 }
 
 impl DeformField {
@@ -81,7 +84,17 @@ impl DeformField {
             d_out: Vec::new(),
             rows: Vec::new(),
             packed: PackedRows::default(),
+            time_per_row: false,
         }
+    }
+
+    /// With `true`, the time features go into every row of the MLP's input, as in
+    /// Deformable-3DGS, instead of being folded once into the biases of the two layers
+    /// that read the input (`Mlp::forward`'s shared columns). The results are equal up to
+    /// the order of the sums; the per-row path is the reference that benchmarks and tests
+    /// compare against.
+    pub fn set_time_per_row(&mut self, per_row: bool) {
+        self.time_per_row = per_row;
     }
 
     /// Evaluates the field at time `t` for the Gaussians `rows` of `means` and scatters
@@ -96,8 +109,15 @@ impl DeformField {
             net.forward(&self.mlp.params, &t_feat, &mut self.time_cache);
             t_feat.clone_from(&self.time_cache.out);
         }
-        encode_rows(means, rows, &t_feat, self.cfg.pos_freqs, &mut self.enc);
-        self.mlp.forward(&self.enc, rows.len(), &mut self.cache);
+        // Every row shares t: its features cost one bias per layer, not a column per row.
+        let (in_rows, shared) = if self.time_per_row {
+            (&t_feat[..], &[][..])
+        } else {
+            (&[][..], &t_feat[..])
+        };
+        encode_rows(means, rows, in_rows, self.cfg.pos_freqs, &mut self.enc);
+        self.mlp
+            .forward(&self.enc, rows.len(), shared, &mut self.cache);
         for (o, &i) in self.cache.out.chunks_exact(HEAD).zip(rows) {
             let i = i as usize;
             out.dx[i * 3..i * 3 + 3].copy_from_slice(&o[0..3]);

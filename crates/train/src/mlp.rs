@@ -39,6 +39,11 @@ pub struct Mlp {
 #[derive(Clone, Debug, Default)]
 pub struct MlpCache {
     rows: usize,
+    /// Input columns shared by every row (see [`Mlp::forward`]), kept for the backward.
+    shared: Vec<f32>,
+    /// Each layer's bias with the shared columns' contribution folded in, layer after
+    /// layer (`fan_out` values each).
+    bias: Vec<f32>,
     /// Post-ReLU outputs of the hidden layers, chunk-major: row chunk `c` (ROW_CHUNK rows,
     /// `n` in the last) holds `depth` blocks of `n × width`, layer after layer, so that one
     /// chunk's whole pass stays in cache.
@@ -148,15 +153,26 @@ impl Mlp {
         &self.params[ly.b_off..ly.b_off + ly.fan_out]
     }
 
-    /// Forward over `rows` rows of `input` (`rows × in_dim`); the result is `cache.out`.
+    /// Forward over `rows` rows; the result is `cache.out`. The input's last
+    /// `shared.len()` columns hold the same values in every row (the field's time
+    /// features): they are passed once in `shared` and folded into the biases of the
+    /// layers that read the input (`b + shared·W_shared`), so `input` holds only the
+    /// other columns (`rows × (in_dim − shared.len())`). With `shared` empty every column
+    /// is per row. Equal to feeding the shared values in every row up to the order of the
+    /// sums.
     /// Chunk-major: each chunk of ROW_CHUNK rows goes through every layer before the next
     /// (its activations stay in L2 instead of streaming `rows × width` per layer).
-    pub fn forward(&self, input: &[f32], rows: usize, cache: &mut MlpCache) {
-        assert_eq!(input.len(), rows * self.in_dim, "MLP input size");
+    pub fn forward(&self, input: &[f32], rows: usize, shared: &[f32], cache: &mut MlpCache) {
+        let per_row = self.per_row_dim(shared.len());
+        assert_eq!(input.len(), rows * per_row, "MLP input size");
         cache.rows = rows;
+        cache.shared.clear();
+        cache.shared.extend_from_slice(shared);
+        self.fold_shared(shared, &mut cache.bias);
         let (w, depth) = (self.width, self.depth);
         cache.acts.resize(rows * w * depth, 0.0);
         cache.out.resize(rows * self.out_dim, 0.0);
+        let bias = &cache.bias;
         cache
             .out
             .par_chunks_mut(ROW_CHUNK * self.out_dim)
@@ -164,7 +180,7 @@ impl Mlp {
             .enumerate()
             .for_each(|(c, (out, acts))| {
                 let n = out.len() / self.out_dim;
-                let x = &input[c * ROW_CHUNK * self.in_dim..][..n * self.in_dim];
+                let x = &input[c * ROW_CHUNK * per_row..][..n * per_row];
                 for l in 0..=depth {
                     let (prev, rest) = acts.split_at_mut(l.min(depth) * n * w);
                     let h_in = if l == 0 { x } else { &prev[(l - 1) * n * w..] };
@@ -173,32 +189,74 @@ impl Mlp {
                     } else {
                         &mut rest[..n * w]
                     };
-                    self.layer_forward(l, x, h_in, n, o, l < depth);
+                    let b = &bias[self.bias_offset(l)..][..self.layers[l].fan_out];
+                    self.layer_forward(l, per_row, x, h_in, n, o, b, l < depth);
                 }
             });
     }
 
-    /// `out = relu?(h_in·W_h [+ x·W_x] + b)` for layer `l` over `n` rows.
+    /// Columns of the input given per row when `shared` of them are shared.
+    fn per_row_dim(&self, shared: usize) -> usize {
+        assert!(shared <= self.in_dim, "more shared columns than inputs");
+        self.in_dim - shared
+    }
+
+    /// Whether layer `l` reads the encoded input: the first, and the one after the skip.
+    fn reads_input(&self, l: usize) -> bool {
+        l == 0 || Some(l - 1) == self.skip
+    }
+
+    /// Where layer `l`'s bias starts in [`MlpCache::bias`].
+    fn bias_offset(&self, l: usize) -> usize {
+        self.layers[..l].iter().map(|ly| ly.fan_out).sum()
+    }
+
+    /// `out` = every layer's bias, plus `Σ_c shared[c]·W[per_row + c, ·]` for the layers
+    /// that read the input (the weight rows of the shared columns follow the per-row ones
+    /// in both the first and the skip layer).
+    fn fold_shared(&self, shared: &[f32], out: &mut Vec<f32>) {
+        let per_row = self.per_row_dim(shared.len());
+        out.clear();
+        for (l, ly) in self.layers.iter().enumerate() {
+            let start = out.len();
+            out.extend_from_slice(self.bias(l));
+            if !self.reads_input(l) {
+                continue;
+            }
+            let b = &mut out[start..];
+            for (c, &s) in shared.iter().enumerate() {
+                let w = &self.params[ly.w_off + (per_row + c) * ly.fan_out..][..ly.fan_out];
+                for (b, &w) in b.iter_mut().zip(w) {
+                    *b += s * w;
+                }
+            }
+        }
+    }
+
+    /// `out = relu?(h_in·W_h [+ x·W_x] + b)` for layer `l` over `n` rows, `x` holding
+    /// `per_row` columns and `b` the bias with the shared columns folded in.
+    #[allow(clippy::too_many_arguments)]
     fn layer_forward(
         &self,
         l: usize,
+        per_row: usize,
         x: &[f32],
         h_in: &[f32],
         n: usize,
         o: &mut [f32],
+        b: &[f32],
         relu: bool,
     ) {
-        let ly = self.layers[l];
-        let (w_x, w_h) = self.split_weights(l);
-        let h_dim = if l == 0 { self.in_dim } else { self.width };
+        let fo = self.layers[l].fan_out;
+        let (w_x, w_h) = self.split_weights(l, per_row);
+        let h_dim = if l == 0 { per_row } else { self.width };
         let hin = Mat::row_major(&h_in[..n * h_dim], n, h_dim);
-        matmul(o, hin, Mat::row_major(w_h, h_dim, ly.fan_out), false);
+        matmul(o, hin, Mat::row_major(w_h, h_dim, fo), false);
         if !w_x.is_empty() {
-            let wx = Mat::row_major(w_x, self.in_dim, ly.fan_out);
-            matmul(o, Mat::row_major(x, n, self.in_dim), wx, true);
+            let wx = Mat::row_major(w_x, per_row, fo);
+            matmul(o, Mat::row_major(x, n, per_row), wx, true);
         }
-        let b = self.bias(l);
-        for row in o.chunks_exact_mut(ly.fan_out) {
+        for row in o.chunks_exact_mut(fo) {
             for (v, bb) in row.iter_mut().zip(b) {
                 let s = *v + bb;
                 *v = if relu && s < 0.0 { 0.0 } else { s };
@@ -206,19 +264,27 @@ impl Mlp {
         }
     }
 
-    /// Layer `l`'s weights split into the rows for the re-fed input (skip layer only,
-    /// else empty) and the rows for the previous layer's output.
-    fn split_weights(&self, l: usize) -> (&[f32], &[f32]) {
+    /// Layer `l`'s weight rows that multiply per-row values, split into those of the
+    /// re-fed input (skip layer only, else empty) and those of the layer's main input
+    /// (the previous layer's output; for layer 0 the input itself). The rows of shared
+    /// columns (`per_row..in_dim` of the input's rows) are in neither: they are folded
+    /// into the bias.
+    fn split_weights(&self, l: usize, per_row: usize) -> (&[f32], &[f32]) {
         let w = self.weights(l);
-        if l > 0 && Some(l - 1) == self.skip {
-            w.split_at(self.in_dim * self.layers[l].fan_out)
+        let fo = self.layers[l].fan_out;
+        if l == 0 {
+            (&[][..], &w[..per_row * fo])
+        } else if self.reads_input(l) {
+            (&w[..per_row * fo], &w[self.in_dim * fo..])
         } else {
             (&[][..], w)
         }
     }
 
     /// Gradient of the parameters given `d_out` (`rows × out_dim`) for the input of the
-    /// last forward. `grad` is overwritten. No gradient w.r.t. the input: Deformable-3DGS
+    /// last forward (its per-row columns in `input`, as given to it). `grad` is
+    /// overwritten. The weight rows of shared columns get `shared[c]·Σ_rows dz`, i.e.
+    /// `shared[c]` times the layer's bias gradient. No gradient w.r.t. the input: Deformable-3DGS
     /// feeds the field detached canonical means (docs/architecture.md "Deformation").
     /// Chunk-major like the forward pass; each job of CHUNKS_PER_JOB chunks sums into its
     /// own partial gradient, and the partials are added in job order.
@@ -231,10 +297,15 @@ impl Mlp {
     ) {
         let rows = cache.rows;
         assert_eq!(d_out.len(), rows * self.out_dim, "MLP d_out size");
+        let per_row = self.per_row_dim(cache.shared.len());
+        assert_eq!(input.len(), rows * per_row, "MLP input size");
         let job_rows = ROW_CHUNK * CHUNKS_PER_JOB;
         let jobs = rows.div_ceil(job_rows).max(1);
         let MlpCache {
-            acts, jobs: bufs, ..
+            acts,
+            jobs: bufs,
+            shared,
+            ..
         } = cache;
         bufs.resize_with(jobs, JobBuffers::default);
         bufs.par_iter_mut().enumerate().for_each(|(j, b)| {
@@ -243,7 +314,7 @@ impl Mlp {
             let (r0, r1) = (j * job_rows, ((j + 1) * job_rows).min(rows));
             for c0 in (r0..r1).step_by(ROW_CHUNK) {
                 let n = (r1 - c0).min(ROW_CHUNK);
-                self.chunk_backward(input, d_out, acts, c0, n, b);
+                self.chunk_backward(per_row, input, d_out, acts, c0, n, b);
             }
         });
         grad.clear();
@@ -251,6 +322,25 @@ impl Mlp {
         for b in bufs.iter() {
             for (d, s) in grad.iter_mut().zip(&b.grad) {
                 *d += s;
+            }
+        }
+        self.shared_weight_grad(shared, grad);
+    }
+
+    /// dW of the shared columns' weight rows: `Σ_rows shared[c]·dz = shared[c]·db`.
+    fn shared_weight_grad(&self, shared: &[f32], grad: &mut [f32]) {
+        let per_row = self.per_row_dim(shared.len());
+        for (l, ly) in self.layers.iter().enumerate() {
+            if !self.reads_input(l) {
+                continue;
+            }
+            let fo = ly.fan_out;
+            let (gw, gb) = grad[ly.w_off..ly.b_off + fo].split_at_mut(ly.fan_in * fo);
+            for (c, &s) in shared.iter().enumerate() {
+                let row = &mut gw[(per_row + c) * fo..][..fo];
+                for (g, &d) in row.iter_mut().zip(gb.iter()) {
+                    *g = s * d;
+                }
             }
         }
     }
@@ -271,6 +361,7 @@ impl Mlp {
         grad: &mut Vec<f32>,
     ) {
         let rows = cache.rows;
+        let per_row = self.per_row_dim(cache.shared.len());
         packed.keep.clear();
         packed.keep.extend(
             d_out
@@ -292,7 +383,7 @@ impl Mlp {
         p_in.clear();
         p_dout.clear();
         for &r in keep.iter() {
-            p_in.extend_from_slice(&input[r * self.in_dim..(r + 1) * self.in_dim]);
+            p_in.extend_from_slice(&input[r * per_row..(r + 1) * per_row]);
             p_dout.extend_from_slice(&d_out[r * self.out_dim..(r + 1) * self.out_dim]);
         }
         self.gather_acts(cache, keep, p_cache);
@@ -329,6 +420,7 @@ impl Mlp {
             c * ROW_CHUNK * w * depth + l * n * w + (r % ROW_CHUNK) * w
         };
         out.rows = m;
+        out.shared.clone_from(&cache.shared);
         out.acts.resize(m * w * depth, 0.0);
         out.acts
             .par_chunks_mut(ROW_CHUNK * w * depth)
@@ -346,8 +438,10 @@ impl Mlp {
     }
 
     /// Backward of the `n` rows starting at `c0` (one forward chunk) into `b.grad`.
+    #[allow(clippy::too_many_arguments)]
     fn chunk_backward(
         &self,
+        per_row: usize,
         input: &[f32],
         d_out: &[f32],
         acts: &[f32],
@@ -358,7 +452,7 @@ impl Mlp {
         let JobBuffers { grad: g, dz, dh } = b;
         let (w, depth) = (self.width, self.depth);
         let acts = &acts[c0 * w * depth..][..n * w * depth];
-        let x = &input[c0 * self.in_dim..][..n * self.in_dim];
+        let x = &input[c0 * per_row..][..n * per_row];
         dz.clear();
         dz.extend_from_slice(&d_out[c0 * self.out_dim..][..n * self.out_dim]);
         for l in (0..=depth).rev() {
@@ -377,10 +471,10 @@ impl Mlp {
             } else {
                 &acts[(l - 1) * n * w..][..n * w]
             };
-            self.layer_param_grad(l, x, h_in, dz, n, g);
+            self.layer_param_grad(l, per_row, x, h_in, dz, n, g);
             if l > 0 {
                 let ly = self.layers[l];
-                let (_, w_h) = self.split_weights(l);
+                let (_, w_h) = self.split_weights(l, per_row);
                 dh.resize(n * w, 0.0);
                 let d = Mat::row_major(dz, n, ly.fan_out);
                 matmul(dh, d, Mat::row_major(w_h, w, ly.fan_out).t(), false);
@@ -389,10 +483,13 @@ impl Mlp {
         }
     }
 
-    /// Adds dW = inputᵀ·dz and db = Σ_rows dz of layer `l` over `n` rows into `g`.
+    /// Adds dW = inputᵀ·dz (the per-row input rows; shared ones are done once by
+    /// [`Self::shared_weight_grad`]) and db = Σ_rows dz of layer `l` over `n` rows into `g`.
+    #[allow(clippy::too_many_arguments)]
     fn layer_param_grad(
         &self,
         l: usize,
+        per_row: usize,
         x: &[f32],
         h_in: &[f32],
         dz: &[f32],
@@ -401,14 +498,21 @@ impl Mlp {
     ) {
         let ly = self.layers[l];
         let fo = ly.fan_out;
-        let is_skip = l > 0 && Some(l - 1) == self.skip;
-        let h_dim = if l == 0 { self.in_dim } else { self.width };
+        let h_dim = if l == 0 { per_row } else { self.width };
         let dzm = Mat::row_major(dz, n, fo);
         let (gw, gb) = g[ly.w_off..ly.b_off + fo].split_at_mut(ly.fan_in * fo);
-        let (gx, gh) = gw.split_at_mut(if is_skip { self.in_dim * fo } else { 0 });
+        // Same row ranges as `split_weights`.
+        let (gx, gh): (&mut [f32], &mut [f32]) = if l == 0 {
+            (&mut [], &mut gw[..per_row * fo])
+        } else if self.reads_input(l) {
+            let (x_rows, h_rows) = gw.split_at_mut(self.in_dim * fo);
+            (&mut x_rows[..per_row * fo], h_rows)
+        } else {
+            (&mut [], gw)
+        };
         matmul(gh, Mat::row_major(h_in, n, h_dim).t(), dzm, true);
-        if is_skip {
-            matmul(gx, Mat::row_major(x, n, self.in_dim).t(), dzm, true);
+        if !gx.is_empty() {
+            matmul(gx, Mat::row_major(x, n, per_row).t(), dzm, true);
         }
         for row in dz.chunks_exact(fo) {
             for (b, d) in gb.iter_mut().zip(row) {
@@ -426,7 +530,7 @@ mod tests {
 
     fn loss(mlp: &Mlp, x: &[f32], rows: usize, w: &[f32]) -> f64 {
         let mut c = MlpCache::default();
-        mlp.forward(x, rows, &mut c);
+        mlp.forward(x, rows, &[], &mut c);
         c.out
             .iter()
             .zip(w)
@@ -446,7 +550,7 @@ mod tests {
         let x: Vec<f32> = (0..rows * ind).map(|_| rng.gen_range(-1.0..1.0)).collect();
         let w: Vec<f32> = (0..rows * 3).map(|_| rng.gen_range(-1.0..1.0)).collect();
         let mut c = MlpCache::default();
-        mlp.forward(&x, rows, &mut c);
+        mlp.forward(&x, rows, &[], &mut c);
         let mut g = Vec::new();
         mlp.backward(&x, &w, &mut c, &mut g);
         let n = mlp.params.len();
@@ -475,7 +579,7 @@ mod tests {
         }
         let w: Vec<f32> = (0..rows * 3).map(|_| rng.gen_range(-1.0..1.0)).collect();
         let mut c = MlpCache::default();
-        mlp.forward(&x, rows, &mut c);
+        mlp.forward(&x, rows, &[], &mut c);
         let mut g = Vec::new();
         mlp.backward(&x, &w, &mut c, &mut g);
         let an = mlp.shared_input_grad(&g, 4..6);
@@ -490,6 +594,64 @@ mod tests {
                 (fd - a as f64).abs() < 2e-2 * fd.abs().max(1.0),
                 "column {k}: {fd} vs {a}"
             );
+        }
+    }
+
+    /// Shared columns folded into the biases: outputs and every parameter gradient (the
+    /// shared columns' weight rows included, full and packed backward) equal those of
+    /// the same columns given in every row, up to the order of the sums.
+    #[test]
+    fn shared_columns_equal_the_same_columns_per_row() {
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        let (ind, n_shared, rows) = (9, 3, ROW_CHUNK * CHUNKS_PER_JOB + 500);
+        let mlp = Mlp::new(ind, 16, 4, 1, 10, &mut rng);
+        let shared: Vec<f32> = (0..n_shared).map(|_| rng.gen_range(-1.0..1.0)).collect();
+        let own: Vec<f32> = (0..rows * (ind - n_shared))
+            .map(|_| rng.gen_range(-1.0..1.0))
+            .collect();
+        let full: Vec<f32> = own
+            .chunks_exact(ind - n_shared)
+            .flat_map(|r| r.iter().chain(&shared).copied())
+            .collect();
+        // Half the rows without gradient, so that the packed path runs too.
+        let d: Vec<f32> = (0..rows * 10)
+            .map(|i| {
+                if (i / 10) % 2 == 0 {
+                    0.0
+                } else {
+                    rng.gen_range(-1.0..1.0)
+                }
+            })
+            .collect();
+        let close = |a: &[f32], b: &[f32], what: &str| {
+            assert_eq!(a.len(), b.len());
+            let norm = a.iter().map(|v| v * v).sum::<f32>().sqrt();
+            let diff = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f32>();
+            assert!(
+                diff.sqrt() <= 1e-5 * norm,
+                "{what}: {} vs {norm}",
+                diff.sqrt()
+            );
+            assert!(norm > 0.0, "{what} is zero");
+        };
+        let (mut a, mut b) = (MlpCache::default(), MlpCache::default());
+        mlp.forward(&full, rows, &[], &mut a);
+        mlp.forward(&own, rows, &shared, &mut b);
+        close(&a.out, &b.out, "output");
+        let (mut ga, mut gb) = (Vec::new(), Vec::new());
+        mlp.backward(&full, &d, &mut a, &mut ga);
+        mlp.backward(&own, &d, &mut b, &mut gb);
+        close(&ga, &gb, "gradient");
+        let (mut pa, mut pb) = (PackedRows::default(), PackedRows::default());
+        mlp.backward_nonzero(&full, &d, &mut a, &mut pa, &mut ga);
+        mlp.backward_nonzero(&own, &d, &mut b, &mut pb, &mut gb);
+        assert_eq!(pb.kept(), rows / 2);
+        close(&ga, &gb, "packed gradient");
+        // The shared columns' weight rows of both input-reading layers are nonzero.
+        for l in [0, 2] {
+            let ly = mlp.layers[l];
+            let rows_c = &gb[ly.w_off + (ind - n_shared) * ly.fan_out..][..n_shared * ly.fan_out];
+            assert!(rows_c.iter().all(|&v| v != 0.0), "layer {l}");
         }
     }
 
@@ -511,7 +673,7 @@ mod tests {
                 })
                 .collect();
             let mut c = MlpCache::default();
-            mlp.forward(&x, rows, &mut c);
+            mlp.forward(&x, rows, &[], &mut c);
             let (mut full, mut part) = (Vec::new(), Vec::new());
             mlp.backward(&x, &d, &mut c, &mut full);
             let mut packed = PackedRows::default();
@@ -538,13 +700,13 @@ mod tests {
         assert_eq!(mlp.num_params(), n);
         let x: Vec<f32> = (0..3000 * 7).map(|_| rng.gen_range(-1.0..1.0)).collect();
         let mut a = MlpCache::default();
-        mlp.forward(&x, 3000, &mut a);
+        mlp.forward(&x, 3000, &[], &mut a);
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(1)
             .build()
             .unwrap();
         let mut b = MlpCache::default();
-        pool.install(|| mlp.forward(&x, 3000, &mut b));
+        pool.install(|| mlp.forward(&x, 3000, &[], &mut b));
         assert_eq!(a.out, b.out);
         // The backward too: 3000 rows are several chunks but one job, so also check a
         // multi-job size.
@@ -558,7 +720,7 @@ mod tests {
                 .unwrap();
             pool.install(|| {
                 let (mut c, mut g) = (MlpCache::default(), Vec::new());
-                mlp.forward(&x, rows, &mut c);
+                mlp.forward(&x, rows, &[], &mut c);
                 mlp.backward(&x, &d, &mut c, &mut g);
                 g
             })

@@ -36,10 +36,16 @@ pub fn apply(model: &GaussianModel, delta: Option<&DeformOutput>, out: &mut Defo
     out.means.resize(n * 3, 0.0);
     out.quats.resize(n * 4, 0.0);
     out.scales.resize(n * 3, 0.0);
-    out.means.copy_from_slice(&model.means);
-    for (s, l) in out.scales.iter_mut().zip(&model.log_scales) {
-        *s = l.exp();
-    }
+    // Elementwise, so parallel is bit-identical to serial (one `expf` per value; serial,
+    // these two lines were a quarter of the phase on 2 threads).
+    out.means
+        .par_iter_mut()
+        .zip(model.means.par_iter())
+        .for_each(|(o, m)| *o = *m);
+    out.scales
+        .par_iter_mut()
+        .zip(model.log_scales.par_iter())
+        .for_each(|(s, l)| *s = l.exp());
     out.quats
         .par_chunks_mut(4)
         .zip(model.quats.par_chunks(4))
@@ -68,17 +74,17 @@ pub fn backward(
     out: &mut CanonicalGrads,
 ) {
     let n = model.len();
-    out.means.clear();
-    out.means.extend_from_slice(g_means);
+    out.means.resize(n * 3, 0.0);
+    out.means
+        .par_iter_mut()
+        .zip(g_means.par_iter())
+        .for_each(|(o, g)| *o = *g);
     out.log_scales.resize(n * 3, 0.0);
-    for ((o, l), g) in out
-        .log_scales
-        .iter_mut()
-        .zip(&model.log_scales)
-        .zip(g_scales)
-    {
-        *o = l.exp() * g; // d/dlog s = s·d/ds
-    }
+    out.log_scales
+        .par_iter_mut()
+        .zip(model.log_scales.par_iter())
+        .zip(g_scales.par_iter())
+        .for_each(|((o, l), g)| *o = l.exp() * g); // d/dlog s = s·d/ds
     out.quats.resize(n * 4, 0.0);
     out.quats
         .par_chunks_mut(4)

@@ -227,6 +227,55 @@ mod tests {
         assert!(rel < 2e-2, "relative gradient error {rel}");
     }
 
+    /// The time features folded into the biases give the field's outputs and its whole
+    /// gradient (time network included) of the reference path that writes them into every
+    /// row, up to the order of the sums; with and without the time network.
+    #[test]
+    fn time_in_the_bias_equals_time_per_row() {
+        for time_net_width in [0, 6] {
+            let cfg = FieldConfig {
+                depth: 4,
+                width: 16,
+                skip: 2,
+                pos_freqs: 3,
+                time_freqs: 2,
+                time_net_width,
+                time_net_out: 4,
+                head_init_scale: 1.0,
+                ..FieldConfig::default()
+            };
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+            let mut f = DeformField::new(&cfg, &mut rng);
+            let n = 3000;
+            let means: Vec<f32> = (0..n * 3).map(|_| rng.gen_range(-1.0..1.0)).collect();
+            let rows: Vec<u32> = (0..n as u32).filter(|i| i % 3 != 1).collect();
+            let mut d = DeformOutput::default();
+            d.reset(n);
+            for v in d.dx.iter_mut().chain(&mut d.dr).chain(&mut d.ds) {
+                *v = rng.gen_range(-1.0..1.0);
+            }
+            let mut run = |per_row: bool| {
+                f.set_time_per_row(per_row);
+                let (mut out, mut g) = (DeformOutput::default(), Vec::new());
+                f.forward(&means, 0.61, &rows, &mut out);
+                f.backward(&d, &mut g);
+                ([out.dx, out.dr, out.ds].concat(), g)
+            };
+            let (out_a, g_a) = run(true);
+            let (out_b, g_b) = run(false);
+            for (a, b, what) in [(&out_a, &out_b, "δ"), (&g_a, &g_b, "gradient")] {
+                let norm = a.iter().map(|v| v * v).sum::<f32>().sqrt();
+                let diff = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f32>();
+                assert!(norm > 0.0);
+                assert!(
+                    diff.sqrt() <= 1e-5 * norm,
+                    "{what}, time net {time_net_width}: {} vs {norm}",
+                    diff.sqrt()
+                );
+            }
+        }
+    }
+
     /// `head_init_scale = 0` starts the field at δ = 0 everywhere, and it still learns:
     /// the head's weights get a gradient from the (nonzero) hidden activations.
     #[test]

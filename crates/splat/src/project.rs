@@ -137,14 +137,9 @@ impl GaussIn<f32> {
     }
 }
 
-/// Gradient w.r.t. [`GaussIn`] (the quaternion's through its normalization).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct GaussGrad<T> {
-    pub mean: [T; 3],
-    pub quat: [T; 4],
-    pub scale: [T; 3],
-    pub logit: T,
-}
+/// Gradient w.r.t. [`GaussIn`], field by field (the quaternion's through its
+/// normalization).
+pub(crate) type GaussGrad<T> = GaussIn<T>;
 
 /// SH coefficients of one Gaussian (or of 16), `[k][channel]`, the first
 /// `num_coeffs(degree)` entries used.

@@ -8,6 +8,7 @@
 use crate::gemm_util::{matmul, Mat};
 use rand::Rng;
 use rayon::prelude::*;
+use std::ops::Range;
 
 /// Rows per parallel work item; fixed so the summation order never changes.
 const ROW_CHUNK: usize = 1024;
@@ -264,21 +265,28 @@ impl Mlp {
         }
     }
 
-    /// Layer `l`'s weight rows that multiply per-row values, split into those of the
-    /// re-fed input (skip layer only, else empty) and those of the layer's main input
-    /// (the previous layer's output; for layer 0 the input itself). The rows of shared
-    /// columns (`per_row..in_dim` of the input's rows) are in neither: they are folded
-    /// into the bias.
+    /// Layer `l`'s weight rows that multiply per-row values, as ranges of its weights:
+    /// those of the re-fed input (skip layer only, else empty) and those of the layer's
+    /// main input (the previous layer's output; for layer 0 the input itself). The rows
+    /// of shared columns (`per_row..in_dim` of the input's rows) are in neither: they are
+    /// folded into the bias. The first range ends before the second starts.
+    fn weight_rows(&self, l: usize, per_row: usize) -> (Range<usize>, Range<usize>) {
+        let ly = self.layers[l];
+        let (fo, all) = (ly.fan_out, ly.fan_in * ly.fan_out);
+        if l == 0 {
+            (0..0, 0..per_row * fo)
+        } else if self.reads_input(l) {
+            (0..per_row * fo, self.in_dim * fo..all)
+        } else {
+            (0..0, 0..all)
+        }
+    }
+
+    /// Layer `l`'s weights at [`Self::weight_rows`].
     fn split_weights(&self, l: usize, per_row: usize) -> (&[f32], &[f32]) {
         let w = self.weights(l);
-        let fo = self.layers[l].fan_out;
-        if l == 0 {
-            (&[][..], &w[..per_row * fo])
-        } else if self.reads_input(l) {
-            (&w[..per_row * fo], &w[self.in_dim * fo..])
-        } else {
-            (&[][..], w)
-        }
+        let (x, h) = self.weight_rows(l, per_row);
+        (&w[x], &w[h])
     }
 
     /// Gradient of the parameters given `d_out` (`rows × out_dim`) for the input of the
@@ -397,8 +405,7 @@ impl Mlp {
     /// at no cost per row.
     pub fn shared_input_grad(&self, grad: &[f32], cols: std::ops::Range<usize>) -> Vec<f32> {
         let mut out = vec![0.0f32; cols.len()];
-        let skip_layer = self.skip.map(|s| s + 1);
-        for l in std::iter::once(0).chain(skip_layer) {
+        for l in (0..=self.depth).filter(|&l| self.reads_input(l)) {
             let ly = self.layers[l];
             let gb = &grad[ly.b_off..ly.b_off + ly.fan_out];
             for (o, c) in out.iter_mut().zip(cols.clone()) {
@@ -501,15 +508,9 @@ impl Mlp {
         let h_dim = if l == 0 { per_row } else { self.width };
         let dzm = Mat::row_major(dz, n, fo);
         let (gw, gb) = g[ly.w_off..ly.b_off + fo].split_at_mut(ly.fan_in * fo);
-        // Same row ranges as `split_weights`.
-        let (gx, gh): (&mut [f32], &mut [f32]) = if l == 0 {
-            (&mut [], &mut gw[..per_row * fo])
-        } else if self.reads_input(l) {
-            let (x_rows, h_rows) = gw.split_at_mut(self.in_dim * fo);
-            (&mut x_rows[..per_row * fo], h_rows)
-        } else {
-            (&mut [], gw)
-        };
+        let (x_rows, h_rows) = self.weight_rows(l, per_row);
+        let (x_part, h_part) = gw.split_at_mut(h_rows.start);
+        let (gx, gh) = (&mut x_part[x_rows], &mut h_part[..h_rows.len()]);
         matmul(gh, Mat::row_major(h_in, n, h_dim).t(), dzm, true);
         if !gx.is_empty() {
             matmul(gx, Mat::row_major(x, n, per_row).t(), dzm, true);

@@ -39,7 +39,12 @@ enum Command {
 }
 
 fn main() -> anyhow::Result<()> {
+    // Colour codes only on a terminal: logs redirected to a file or a pipe (CI, Slurm,
+    // `compare`'s child processes) stay plain text. NO_COLOR (no-color.org) turns them off.
+    use std::io::IsTerminal;
+    let ansi = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();
     tracing_subscriber::fmt()
+        .with_ansi(ansi)
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),

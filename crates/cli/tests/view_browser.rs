@@ -1,4 +1,4 @@
-//! `semdynreg view` in a real browser (issue 20): two tiny runs (one plain, one trained with
+//! `semdynreg view` in a real browser: two tiny runs (one plain, one trained with
 //! --objects) side by side in headless Chromium drawing WebGL through SwiftShader. The page
 //! must draw both panes, redraw when the time slider moves (the cars move), colour by
 //! object, keep the time in its address, and a page told to draw nothing (`?blank=1`)

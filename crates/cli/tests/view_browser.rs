@@ -364,7 +364,7 @@ fn view_serves_two_runs_and_draws_them_in_a_browser() {
 }
 
 /// On runs of one's own (SEMDYNREG_VIEW_RUNS=RUN,RUN2), e.g. for the timings of a large
-/// model and the README's screenshot.
+/// model and docs/viewer.md's screenshot.
 #[test]
 #[ignore]
 fn view_on_given_runs() {

@@ -2,7 +2,8 @@
 //! short schedule: `segment --masks gt` → `compare` in training mode (baseline `--no-reg`,
 //! SemDynReg `--reg` forked from it at the regularizer's start, rigid objects
 //! `--no-reg --objects` from scratch, same seed), which must leave the three runs, the
-//! regularizer's log and a results.json with every key of issue 6 for each.
+//! regularizer's log and a results.json with every required key
+//! (`report::results`) for each.
 
 use serde_json::Value;
 use std::path::Path;

@@ -1,5 +1,5 @@
 //! Writing into a folder that fails mid-write ends with a clear error and leaves no partial
-//! file under its final name (issue 19, item 5): `train` (checkpoints), `render` (PNGs) and
+//! file under its final name: `train` (checkpoints), `render` (PNGs) and
 //! `export` (PLY) into a small tmpfs that fills up, and into a read-only one.
 //!
 //! The tmpfs is mounted in a private user + mount namespace (`unshare --user

@@ -1,5 +1,5 @@
-//! Seeded mutation fuzzing through the `semdynreg` binary (issue 19, item 4;
-//! docs/robustness.md): the rasterizer's `.npz` reference cases (`render-case`), and the
+//! Seeded mutation fuzzing through the `semdynreg` binary
+//! (docs/robustness.md): the rasterizer's `.npz` reference cases (`render-case`), and the
 //! "no output after an error" property of `train` on a corrupted scene and `render` on a
 //! corrupted checkpoint.
 //!

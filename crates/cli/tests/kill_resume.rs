@@ -1,4 +1,4 @@
-//! SIGKILL during `semdynreg train` loses nothing (issue 19, item 3): a run killed again and
+//! SIGKILL during `semdynreg train` loses nothing: a run killed again and
 //! again, at seeded random moments and at moments a checkpoint is being written, and
 //! resumed each time, always resumes from an intact checkpoint and ends with exactly the
 //! parameters, optimizer state and log of an uninterrupted run on the same thread count.

@@ -1,4 +1,4 @@
-//! Objects as units a user acts on (issue 16, item 6), end to end on a tiny toycars scene
+//! Objects as units a user acts on, end to end on a tiny toycars scene
 //! trained briefly with `--objects`: `render --only/--without`, `export --only` and
 //! `export --per-object` (one PLY per object in its own frame, its trajectory at every
 //! frame, and the background), and the errors for unknown names, both flags at once and a

@@ -126,7 +126,8 @@ fn methods(results: &Value) -> Vec<(String, String)> {
         .collect()
 }
 
-/// The keys issue 6 requires of each method, and the six time steps of its moving crop.
+/// The keys results.json promises for each method, and the six time steps of its moving
+/// crop.
 fn check_method_keys(results: &Value, method: &str, statics: usize) {
     let m = get(results, method);
     for k in [

@@ -1,4 +1,4 @@
-//! `semdynreg view` in a real browser (issue 20): two tiny runs (one plain, one trained with
+//! `semdynreg view` in a real browser: two tiny runs (one plain, one trained with
 //! --objects) side by side in headless Chromium drawing WebGL through SwiftShader. The page
 //! must draw both panes, redraw when the time slider moves (the cars move), colour by
 //! object, keep the time in its address, and a page told to draw nothing (`?blank=1`)
@@ -364,7 +364,7 @@ fn view_serves_two_runs_and_draws_them_in_a_browser() {
 }
 
 /// On runs of one's own (SEMDYNREG_VIEW_RUNS=RUN,RUN2), e.g. for the timings of a large
-/// model and the README's screenshot.
+/// model and docs/viewer.md's screenshot.
 #[test]
 #[ignore]
 fn view_on_given_runs() {

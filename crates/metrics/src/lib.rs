@@ -1,4 +1,4 @@
-//! Image quality metrics for SemDynReg (docs/architecture.md, issue 4): PSNR, SSIM (3DGS
+//! Image quality metrics for SemDynReg (docs/architecture.md): PSNR, SSIM (3DGS
 //! variant with its gradient for the training loss, and the scikit-image variant), LPIPS,
 //! and per-object crops. Images are RGB, HWC interleaved `f32` in [0, 1].
 

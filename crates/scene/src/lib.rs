@@ -6,8 +6,8 @@
 //! - [`ImageU8`] / [`MaskU8`]: 8-bit RGB images and object-ID maps (255 = background),
 //!   read and written as PNG (writes are atomic).
 //! - [`objects`]: the `objects.json` ground truth of the toycars scenes.
-//! - [`toycars`]: the procedural rebuild of the paper's experiment (issue 3), with custom
-//!   routes and rigid props for object-level motion tests (issue 7).
+//! - [`toycars`]: the procedural rebuild of the paper's experiment, with custom routes
+//!   and rigid props for object-level motion tests.
 
 mod dataset;
 mod dnerf;

@@ -1,4 +1,4 @@
-//! `objects.json`: the ground truth of the toycars scenes (issue 3) — each object's
+//! `objects.json`: the ground truth of the toycars scenes — each object's
 //! name, text prompt, whether it moves, its local bounding box, and per frame the 4×4
 //! row-major matrix taking its local coordinates to world coordinates.
 

@@ -1,5 +1,5 @@
-//! Seeded mutation fuzzing of every file the `scene` crate reads (issue 19, item 4;
-//! docs/robustness.md): D-NeRF `transforms_*.json` and its PNG frames, Nerfies
+//! Seeded mutation fuzzing of every file the `scene` crate reads
+//! (docs/robustness.md): D-NeRF `transforms_*.json` and its PNG frames, Nerfies
 //! `dataset.json`, `metadata.json`, `scene.json`, `camera/*.json` and `points.npy`, PNG
 //! images and object-ID masks on their own, `points3d.ply`, `objects.json`.
 //!

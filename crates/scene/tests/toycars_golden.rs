@@ -1,6 +1,6 @@
 //! The presets are used by reported experiments: without `--route`/`--add` their output
-//! must stay byte-identical. These hashes were taken from the generator before routes and
-//! added objects existed (commit 15c3a1e); a change here means the presets changed.
+//! must stay byte-identical. These hashes pin the presets' output as the reported
+//! experiments used it; a change here means the presets changed.
 
 use scene::toycars::{generate, Preset, ToycarsConfig};
 use std::path::Path;

@@ -1,5 +1,5 @@
-//! Seeded mutation fuzzing of the weight files `semantics` reads (issue 19, item 4;
-//! docs/robustness.md): SAM checkpoints (`.pt`: a PyTorch zip holding a pickle and raw
+//! Seeded mutation fuzzing of the weight files `semantics` reads
+//! (docs/robustness.md): SAM checkpoints (`.pt`: a PyTorch zip holding a pickle and raw
 //! storages; and safetensors), CLIP safetensors in the OpenCLIP and Hugging Face layouts
 //! (with a mutated config JSON beside them, or none, when the shapes are inferred), CLIP
 //! PyTorch pickles.

@@ -2,7 +2,8 @@
 //! with `--labels gt` must reach IoU ≥ 0.85 against the ground-truth mask for every vehicle,
 //! a second run must reuse the cache, and `--masks gt` must reproduce the ground truth.
 //! One 480×360 frame on a 16×16 grid keeps it under a minute on 2 cores; the full 32×32 grid
-//! is measured by `sam_speed.rs`. Skips with a printed reason when `mobile_sam.pt` is absent.
+//! is measured by `benches/sam_speed.rs`. Skips with a printed reason when `mobile_sam.pt`
+//! is absent.
 
 mod sam_common;
 

@@ -5,7 +5,7 @@
 //! (`/usr/bin/time -v` around it gives the peak memory of a scenario).
 //!
 //! `-- cull [a|b|cases] [reps]`: the exact tile culling against gsplat's 3.33σ boxes
-//! (issue 17) in one process: intersections, gradient slots, evaluated pairs and pairs with
+//! in one process: intersections, gradient slots, evaluated pairs and pairs with
 //! α ≥ 1/255 of each, then forward and backward timed alternately (`reps` rounds, each one
 //! forward + backward per culling, order swapped every round), medians and ratios.
 //!

@@ -3,7 +3,7 @@
 //! to the tile grid), and each list is in increasing depth (ties: lower index first, as
 //! gsplat's sort of `tile | depth` keys over index-ordered intersections).
 //!
-//! With [`Cull::Exact`] (issue 17) a Gaussian keeps, in each tile row of that box, only the
+//! With [`Cull::Exact`] a Gaussian keeps, in each tile row of that box, only the
 //! tiles its opacity-aware ellipse `σ ≤ ln(255·o)` can reach, in the kernels' own row tests
 //! ([`Splat::rows`], [`Splat::chord`]): the per-row analogue of the exact ellipse–tile tests
 //! of FlashGS, StopThePop (as ported in Brush) and Speedy-Splat's AccuTile, and of gsplat's

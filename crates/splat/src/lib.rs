@@ -88,7 +88,7 @@ pub struct RenderOptions {
     pub cull: Cull,
 }
 
-/// Tile culling at binning (issue 17). gsplat 1.5.3 bins every tile of a Gaussian's 3.33σ
+/// Tile culling at binning. gsplat 1.5.3 bins every tile of a Gaussian's 3.33σ
 /// box; a pair contributes only where `o·e^{−σ} ≥ 1/255`, i.e. `σ ≤ ln(255·o)`, which
 /// gsplat's projection exploits since its PR #597 (opacity-aware radius), FlashGS and
 /// Speedy-Splat (SnugBox/AccuTile) with an exact ellipse–tile test.

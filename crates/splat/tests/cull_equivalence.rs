@@ -1,4 +1,4 @@
-//! Exact tile culling (`Cull::Exact`, issue 17) against gsplat's 3.33σ-box binning
+//! Exact tile culling (`Cull::Exact`) against gsplat's 3.33σ-box binning
 //! (`Cull::Box3Sigma`) in one process: images, alphas, top-k lists and weights, radii and
 //! every gradient must be **bit-identical** (the dropped (tile, Gaussian) pairs are ones the
 //! kernels evaluate no row of, so nothing downstream can change; the backward's per-Gaussian

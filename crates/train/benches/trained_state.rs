@@ -1,4 +1,4 @@
-//! One training iteration at a trained state, by phase (issue 17: speed measured where the
+//! One training iteration at a trained state, by phase (speed measured where the
 //! time goes in a real run, not only on a random init). Loads a run's checkpoint with its
 //! scene, exactly as `train --resume` does, and takes training steps from it with density
 //! control off (so every step sees the same Gaussians), printing per phase the median over

@@ -1,4 +1,4 @@
-//! Adam's step against scalar references in the same process (session 10): the four
+//! Adam's step against scalar references in the same process: the four
 //! one-rate groups (20M floats) and SH-like rows of 48 with two rates; asserts the results
 //! are bit-identical and prints medians. `cargo run --release -p train --example adam_probe`
 use rayon::prelude::*;

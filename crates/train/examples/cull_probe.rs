@@ -1,4 +1,4 @@
-//! The rasterizer's exact tile culling (issue 17) at a trained state: loads a checkpoint,
+//! The rasterizer's exact tile culling at a trained state: loads a checkpoint,
 //! deforms its Gaussians to each chosen training frame's time exactly as rendering does
 //! (`render.rs`: visible-rows rule, objects placed), and runs forward + backward with
 //! `Cull::Box3Sigma` (gsplat's 3.33σ boxes) and `Cull::Exact` alternately in one process.

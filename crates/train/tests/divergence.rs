@@ -1,6 +1,6 @@
 //! A loss or parameter that turns NaN/Inf stops training with the iteration and the
 //! parameter group named, and nothing non-finite is ever checkpointed: the last good
-//! checkpoint stays `latest` (issue 19, item 3).
+//! checkpoint stays `latest`.
 
 mod common;
 

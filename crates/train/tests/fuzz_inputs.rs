@@ -1,5 +1,5 @@
-//! Seeded mutation fuzzing of the files a training checkpoint is read from (issue 19,
-//! item 4; docs/robustness.md): `config.toml` (also as a `--config` file),
+//! Seeded mutation fuzzing of the files a training checkpoint is read from
+//! (docs/robustness.md): `config.toml` (also as a `--config` file),
 //! `point_cloud.ply` and `state.safetensors`, through `TrainConfig::from_toml_file`,
 //! `ply::read`, `checkpoint::load_model` and `checkpoint::load_trainer`.
 //!

@@ -1,4 +1,4 @@
-//! `semdynreg compare SCENE --out DIR`: the paper's experiment (issue 6, item 3) with a
+//! `semdynreg compare SCENE --out DIR`: the paper's experiment with a
 //! third method — the baseline, the paper's SemDynReg and rigid objects
 //! (`report::methods::METHODS`) scored on the test split (full frame, and zoomed object
 //! crops at t = 0…5 s), written to `DIR/results.json`, `DIR/report.md` and

@@ -1,4 +1,4 @@
-//! `semdynreg demo`: the paper's experiment end to end at a small size (issue 6, item 4) —
+//! `semdynreg demo`: the paper's experiment end to end at a small size —
 //! generate toycars scene1, build its object-ID maps (the ground-truth masks by default,
 //! SAM or SAM + CLIP on request, saying which), run `compare` (three trainings: baseline,
 //! SemDynReg, rigid objects), print the paper-style tables and the path of `report.html`.

@@ -15,7 +15,7 @@ pub enum Backend {
 }
 
 /// Run a grid of trainings (scenes × modes × config overrides × seeds) here or as Slurm
-/// job arrays, and collect their scores into one table (docs: README, "Sweeps").
+/// job arrays, and collect their scores into one table (docs/sweeps.md).
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The grid file (TOML, e.g. configs/sweeps/ablation.toml); with --collect or --task,

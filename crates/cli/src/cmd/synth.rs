@@ -1,4 +1,4 @@
-//! `semdynreg synth toycars`: generate the built-in toycars scenes (issue 3).
+//! `semdynreg synth toycars`: generate the built-in toycars scenes.
 
 use anyhow::Context;
 use clap::{Args as ClapArgs, Subcommand};

@@ -1,5 +1,5 @@
 //! `semdynreg train SCENE --out RUN [--config F.toml] [--iters N] [--downscale D]
-//! [--seed S] [--resume | --fork FROM]`: deformable 3DGS training (issue 5) with a progress
+//! [--seed S] [--resume | --fork FROM]`: deformable 3DGS training with a progress
 //! bar, a JSONL metrics log (`RUN/metrics.jsonl`), periodic test evaluation, and atomic
 //! checkpoints every `log.checkpoint_interval` iterations, at the regularizer's fork point,
 //! at the end, and on Ctrl-C.
@@ -299,7 +299,8 @@ pub fn run(a: Args) -> Result<()> {
                 "psnr": st.psnr, "num_gaussians": st.num_gaussians, "elapsed_s": before + secs,
                 "it_per_s": (it - first) as f64 / secs.max(1e-9)});
             if let Some(h) = hook.as_ref().filter(|h| h.active_at(it)) {
-                // Per-object group sizes, deviations and skips (issue 6, item 1).
+                // Per-object group sizes, deviations and skips, so a run shows what the
+                // regularizer acted on.
                 line["reg_loss"] = h.last_loss().weighted.into();
                 line["reg_objects"] = serde_json::to_value(h.stats())?;
             }

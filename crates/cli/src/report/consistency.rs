@@ -1,4 +1,4 @@
-//! `deformation_consistency_rms` (issue 6) and the rigidity residual of a trained run: the
+//! `deformation_consistency_rms` and the rigidity residual of a trained run: the
 //! metrics are defined and computed by `train::regularizer::consistency` and
 //! `train::regularizer::rigidity`; this file only feeds them from a run folder.
 //!

@@ -1,4 +1,4 @@
-//! Evaluation and paper-style report of `semdynreg compare` (issue 6, items 3–4): scores
+//! Evaluation and paper-style report of `semdynreg compare`: scores
 //! each compared method's rendered test frames (full frame and per-object crops at
 //! t = 0…5 s), writes `results.json`, `report.md` and `report.html` with figures and plots,
 //! and prints the paper's tables.

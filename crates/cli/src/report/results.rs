@@ -1,7 +1,8 @@
-//! The `DIR/results.json` model of `semdynreg compare` (issue 6, item 3).
+//! The `DIR/results.json` model of `semdynreg compare`.
 //!
-//! The issue fixes the required keys; every one of them is always present (a number, or
-//! `null` where it cannot be measured, with the reason in `notes`). `Option` fields are
+//! The keys are a fixed contract (what a reader of the file may rely on); every one of them
+//! is always present (a number, or `null` where it cannot be measured, with the reason in
+//! `notes`). `Option` fields are
 //! therefore never skipped during serialization. A method that was not compared (no
 //! `--rigid-renders` when scoring renders only) has no key at all, and is not in `methods`.
 

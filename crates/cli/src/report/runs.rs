@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use train::{checkpoint, run::RUN_FILE, TrainConfig};
 
-/// Settings shared by every run (the same seed and schedule, issue 6).
+/// Settings shared by every run (the same seed and schedule, so the
+/// methods differ only in the method).
 #[derive(Clone, Debug)]
 pub struct TrainSettings {
     pub scene: PathBuf,

@@ -28,7 +28,8 @@ fn follow(m: &MethodResults) -> Option<f64> {
     mean_of(m.deformation_follow_per_object.values().map(|&v| Some(v)))
 }
 
-/// The columns of `scripts/ablation.sh`'s table, then the full frame's, follow and time.
+/// The columns of the regularizer's ablation tables (docs/regularizer.md), then the full
+/// frame's, follow and time.
 const METRICS: [Metric; 9] = [
     Metric {
         header: "moving crop PSNR",

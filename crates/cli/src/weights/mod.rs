@@ -1,4 +1,4 @@
-//! Pretrained weights as a first-class step (issue 19): what exists ([`catalog`]), fetching
+//! Pretrained weights as a first-class step: what exists ([`catalog`]), fetching
 //! and verifying it ([`fetch`]), and [`ensure`], which the commands that use weights call on
 //! first use unless `--offline` (or `SEMDYNREG_OFFLINE=1`) is given.
 //!

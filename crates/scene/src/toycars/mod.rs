@@ -1,8 +1,8 @@
 //! `toycars`: the paper's private experiment (Sec. 4.1: three toy vehicles on a plane, one
 //! moving, one moving camera) rebuilt procedurally with ground truth, written in the
-//! D-NeRF layout plus `masks/<file_path>.png` and `objects.json` (issue 3). Beyond the
-//! two presets, `routes` move any object along waypoints and `adds` place rigid props
-//! (issue 7: test scenes for object-level rigid motion).
+//! D-NeRF layout plus `masks/<file_path>.png` and `objects.json`. Beyond the two
+//! presets, `routes` move any object along waypoints and `adds` place rigid props, so that
+//! object-level rigid motion (turns, jumps, two movers, a non-vehicle) can be tested.
 
 mod custom;
 mod geometry;

@@ -1,6 +1,6 @@
 //! Procedural surface colours: a seeded value noise and the printed patterns of the
 //! vehicles and the ground mat. Fine detail (periods of a few pixels at 480×360) is
-//! deliberate: it is what a blurry dynamic reconstruction loses (issue 3).
+//! deliberate: it is what a blurry dynamic reconstruction loses.
 
 use super::geometry::V3;
 

@@ -5,8 +5,8 @@
 //! text: a number token replaced by an extreme literal, which is how a PLY or .npy header
 //! lies about its counts; JSON/TOML trees: a value replaced by a wrong type or an extreme
 //! number, a key deleted, a value nested deeply, an array element repeated) and checks the
-//! property of issue 19: the loader returns (no panic), within [`TIME_LIMIT`] (no hang),
-//! without any single allocation above [`ALLOC_LIMIT`] (a lying header is refused before
+//! robustness property (docs/robustness.md): the loader returns (no panic), within
+//! [`TIME_LIMIT`] (no hang), without any single allocation above [`ALLOC_LIMIT`] (a lying header is refused before
 //! allocating), and an error names the file. The generator is proptest's ChaCha seeded from
 //! the format's name (and `FUZZ_SEED` when set), so a CI run is reproducible.
 //!
@@ -154,7 +154,7 @@ impl Tally {
     }
 }
 
-/// Runs `load` with the properties of issue 19: it must return within [`TIME_LIMIT`]
+/// Runs `load` with the robustness properties: it must return within [`TIME_LIMIT`]
 /// without panicking; an error must mention one of `names` (the file); no allocation may
 /// exceed [`ALLOC_LIMIT`]. Returns the loaded value, or `None` for a (good) error.
 pub fn check_load<T, E>(

@@ -1,11 +1,22 @@
-//! Iteration-time breakdown at 480×360 on toycars scene1 (heavy; ignored by default):
-//! `CARGO_TARGET_DIR=... cargo test --release -p train --test perf -- --ignored --nocapture`
-//! (the test profile has opt-level 3 too). Prints ms per phase for each field option
-//! (`PERF_ONLY_DEFAULT=1`: only the default field).
+//! Iteration time by phase at 480×360 on toycars scene1 (16 frames, 100k random initial
+//! Gaussians, density control off so every step sees the same Gaussians), for each field
+//! option: the default 4×64 on the visible Gaussians, 4×64 on all of them, 2×32, and the
+//! faithful 8×256. Prints one line per option with the ms per phase:
 //!
-//! The same breakdown on a trained model (the Gaussians a real run has, not the random init):
-//! `PERF_CHECKPOINT=RUN/checkpoints/iter_NNNNNNN PERF_SCENE=SCENE cargo test --release -p
-//! train --test perf checkpoint -- --ignored --nocapture`.
+//! ```text
+//! [PERF_ITERS=5] [PERF_ONLY_DEFAULT=1] cargo bench -p train --bench iteration_breakdown
+//! ```
+//!
+//! `PERF_ONLY_DEFAULT=1` times only the default field. The same breakdown on a trained model
+//! (the Gaussians a real run has, not the random init), densification off:
+//!
+//! ```text
+//! PERF_CHECKPOINT=RUN/checkpoints/iter_NNNNNNN PERF_SCENE=SCENE [PERF_ITERS=5] \
+//!     cargo bench -p train --bench iteration_breakdown
+//! ```
+//!
+//! `benches/trained_state.rs` is the finer tool for a trained state (medians per phase, A/B
+//! of the reference paths).
 
 use train::config::FieldConfig;
 use train::{TrainConfig, Trainer};
@@ -61,14 +72,24 @@ fn time_steps(name: &str, mut tr: Trainer, iters: u32) {
     );
 }
 
-#[test]
-#[ignore]
-fn iteration_breakdown_480x360() {
-    let dir = scene_480();
-    let iters: u32 = std::env::var("PERF_ITERS")
+fn main() {
+    if std::env::var_os("PERF_CHECKPOINT").is_some() {
+        iteration_breakdown_checkpoint();
+    } else {
+        iteration_breakdown_480x360();
+    }
+}
+
+fn iters() -> u32 {
+    std::env::var("PERF_ITERS")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(5);
+        .unwrap_or(5)
+}
+
+fn iteration_breakdown_480x360() {
+    let dir = scene_480();
+    let iters = iters();
     let d = FieldConfig::default();
     measure("default 4x64 visible", d.clone(), dir.path(), iters);
     if std::env::var("PERF_ONLY_DEFAULT").is_ok() {
@@ -103,21 +124,17 @@ fn iteration_breakdown_480x360() {
 }
 
 /// Breakdown at a checkpoint's state, densification off (`PERF_CHECKPOINT`, `PERF_SCENE`).
-#[test]
-#[ignore]
 fn iteration_breakdown_checkpoint() {
     let (Ok(ckpt), Ok(scene)) = (
         std::env::var("PERF_CHECKPOINT"),
         std::env::var("PERF_SCENE"),
     ) else {
-        panic!("set PERF_CHECKPOINT (a checkpoint folder) and PERF_SCENE (its scene folder)");
+        eprintln!("set PERF_SCENE (the scene folder of PERF_CHECKPOINT's run)");
+        std::process::exit(2);
     };
     let ds = scene::load_dataset(scene.as_ref(), &scene::LoadOptions::default()).unwrap();
     let mut tr = train::checkpoint::load_trainer(ckpt.as_ref(), ds).unwrap();
     tr.cfg.densify.until = 0;
-    let iters: u32 = std::env::var("PERF_ITERS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(5);
+    let iters = iters();
     time_steps(&format!("checkpoint iteration {}", tr.iteration), tr, iters);
 }

@@ -1,9 +1,8 @@
 //! SAM automatic-mask speed on one 480×360 toycars frame, and the quality of the faster
-//! adaptive mode against the full 32×32 grid. Heavy (≈30 s+), so ignored by default:
+//! adaptive mode against the full 32×32 grid (≈30 s+; needs `mobile_sam.pt`, which
+//! `semdynreg weights fetch` gets, and says so when it is absent):
 //!
-//!     SEMDYNREG_WEIGHTS=weights cargo test --release -p semantics --test sam_speed -- --ignored --nocapture
-//!
-//! (`--release`: the `test` profile's debug assertions slow `gemm` ~7×, docs/performance.md.)
+//!     SEMDYNREG_WEIGHTS=weights cargo bench -p semantics --bench sam_speed
 //!
 //! Prints one JSON object: the measured GEMM rate for the decoder's dominant product shape and
 //! the decoder's floor at that rate (its FLOPs per prompt, `docs/performance.md`), encoder and
@@ -11,6 +10,7 @@
 //! a shared machine — prompt counts, and for the faster modes the per-vehicle IoU (with GT
 //! labels) and the area-weighted best-match IoU of the full grid's masks.
 
+#[path = "../tests/sam_common/mod.rs"]
 mod sam_common;
 
 use std::time::Instant;
@@ -84,11 +84,9 @@ fn best_match_iou(reference: &AutoMasks, other: &AutoMasks) -> f64 {
     num / den.max(1.0)
 }
 
-#[test]
-#[ignore]
-fn sam_speed_and_adaptive_quality() {
-    // SAFETY: the only test in this binary, run before it starts any thread of its own (as
-    // `semdynreg segment` does); the harness's threads do not touch the environment.
+fn main() {
+    // SAFETY: the first thing the program does, before any thread exists (as `semdynreg
+    // segment` does).
     unsafe { semantics::sam::set_thread_count_env() };
     let Some(ckpt) = mobile_sam_path() else {
         return;

@@ -23,6 +23,10 @@ pub fn write_atomic(
         write(&mut buf).map_err(|e| SceneError::io(path, e))?;
         buf.flush().map_err(|e| SceneError::io(path, e))?;
     }
+    // On disk before the rename, so a power cut cannot leave a renamed but empty file.
+    tmp.as_file()
+        .sync_all()
+        .map_err(|e| SceneError::io(path, e))?;
     tmp.persist(path)
         .map_err(|e| SceneError::io(path, e.error))?;
     Ok(())

@@ -21,7 +21,16 @@
 //! it has no built-in state to replay (docs/performance.md says which runs were measured).
 
 use std::path::PathBuf;
+use train::field_node::FieldNode;
 use train::timing::PHASES;
+
+fn field_mut(tr: &mut train::Trainer) -> &mut train::DeformField {
+    &mut tr
+        .nodes
+        .get_mut::<FieldNode>()
+        .expect("every run has a field")
+        .field
+}
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -93,7 +102,7 @@ fn main() {
         let v = step % variants.len();
         match ab.as_deref() {
             Some("projection") => tr.rasterizer_mut().set_scalar_projection(v == 0),
-            Some("field") => tr.field.set_time_per_row(v == 0),
+            Some("field") => field_mut(&mut tr).set_time_per_row(v == 0),
             _ => {}
         }
         samples[v].take(&mut tr);
@@ -140,8 +149,13 @@ impl Samples {
         }
         self.0[PHASES.len()].push(total);
         self.0[PHASES.len() + 1].push(tr.evaluated_pairs() as f64);
-        let evaluated = tr.field.rows().len().max(1) as f64;
-        self.0[PHASES.len() + 2].push(tr.field.rows_with_gradient() as f64 / evaluated);
+        let field = &tr
+            .nodes
+            .get::<FieldNode>()
+            .expect("every run has a field")
+            .field;
+        let evaluated = field.rows().len().max(1) as f64;
+        self.0[PHASES.len() + 2].push(field.rows_with_gradient() as f64 / evaluated);
     }
 
     fn medians(self) -> Vec<f64> {

@@ -41,13 +41,8 @@ fn main() {
     let step = ds.train.len().div_ceil(frames).max(1);
     for fr in ds.train.iter().step_by(step) {
         let cam = &fr.camera;
-        let objects = train::objects::ObjectsView {
-            objects: &lm.objects,
-            column: &lm.column,
-        };
-        let field = lm.field_active().then_some(&mut lm.field);
-        let deformed = renderer.deformed(&lm.model, field, objects, cam, fr.time);
-        let g = train::trainer::gaussians(&lm.model, deformed);
+        let deformed = renderer.deformed(lm.scene(), cam, fr.time);
+        let g = train::deform::gaussians(&lm.model, deformed);
         let opts: Vec<RenderOptions> = culls
             .iter()
             .map(|&cull| RenderOptions {

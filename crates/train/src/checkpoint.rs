@@ -1,18 +1,20 @@
 //! Checkpoints of a run: `RUN/checkpoints/iter_NNNNNNN/` holding the canonical Gaussians as
-//! a 3DGS PLY, everything else that evolves (field weights, Adam moments and steps,
-//! densification statistics, epoch order, RNG position) as safetensors, and the resolved
-//! config, plus `checksums.json` (a CRC-32 per file and per tensor, verified on every load:
+//! a 3DGS PLY, everything else that evolves (the Gaussians' Adam moments and steps,
+//! densification statistics, hook rows, the object column, each node's section, epoch
+//! order, RNG position) as safetensors, and the resolved config, plus `checksums.json` (a CRC-32 per file and per tensor, verified on every load:
 //! [`crate::integrity`]). A checkpoint is written in a hidden folder and renamed into place,
 //! then `RUN/checkpoints/latest` is replaced atomically, so an interrupted save is never
 //! "latest". A state with a non-finite value is never saved ([`crate::finite`]).
 
-use crate::adam::Adam;
 use crate::config::TrainConfig;
 use crate::error::{Result, TrainError};
 use crate::field::DeformField;
-use crate::io::{atomic_write, create_dir_all};
+use crate::io::{create_dir_all, write_atomic};
 use crate::model::{GaussianModel, ROWS};
-use crate::objects::{ObjectsView, RigidObject};
+use crate::node::{SectionReader, SectionWriter};
+use crate::nodes::{NodeInit, Nodes};
+use crate::objects::{RigidObject, RigidObjects};
+use crate::render::Scene;
 use crate::state::{AuxRows, DensifyStats, GaussianState};
 use crate::trainer::Trainer;
 use rand::SeedableRng;
@@ -21,7 +23,8 @@ use safetensors::{Dtype, SafeTensors};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-/// `-2`: the folder carries `checksums.json`; `-1` (before it) still loads, unverified.
+/// `-2`: the folder carries `checksums.json`; `-1` still loads, unverified. Each node's
+/// section keeps the tensor and metadata names of these formats, so both load.
 const FORMAT: &str = "semdynreg-train-2";
 const FORMAT_UNVERIFIED: &str = "semdynreg-train-1";
 const GROUPS: [&str; 5] = ["means", "quats", "log_scales", "opacity", "sh"];
@@ -33,29 +36,34 @@ fn f32_bytes(v: &[f32]) -> Vec<u8> {
     v.iter().flat_map(|x| x.to_le_bytes()).collect()
 }
 
+type Tensors = Vec<(String, Dtype, Vec<usize>, Vec<u8>)>;
+
+/// Collects the nodes' sections into the state file's tensors and metadata.
+struct Sections<'a> {
+    tensors: &'a mut Tensors,
+    meta: &'a mut HashMap<String, String>,
+}
+
+impl SectionWriter for Sections<'_> {
+    fn tensor(&mut self, name: String, shape: Vec<usize>, values: &[f32]) {
+        self.tensors
+            .push((name, Dtype::F32, shape, f32_bytes(values)));
+    }
+
+    fn meta(&mut self, key: &str, value: String) {
+        self.meta.insert(key.to_string(), value);
+    }
+}
+
 /// Serializes everything but the Gaussians' parameters (those go to the PLY).
 fn state_bytes(tr: &Trainer) -> Result<Vec<u8>> {
     let st = &tr.state;
     let n = st.len();
-    let mut tensors: Vec<(String, Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
+    let mut tensors: Tensors = Vec::new();
+    let mut meta = HashMap::new();
     let mut f = |name: String, shape: Vec<usize>, v: &[f32]| {
         tensors.push((name, Dtype::F32, shape, f32_bytes(v)))
     };
-    f(
-        "field.params".into(),
-        vec![tr.field.mlp.params.len()],
-        &tr.field.mlp.params,
-    );
-    f(
-        "field.adam.m".into(),
-        vec![tr.field_adam.m.len()],
-        &tr.field_adam.m,
-    );
-    f(
-        "field.adam.v".into(),
-        vec![tr.field_adam.v.len()],
-        &tr.field_adam.v,
-    );
     for ((a, g), r) in st.adam.iter().zip(GROUPS).zip(ROWS) {
         f(format!("adam.{g}.m"), vec![n, r], &a.m);
         f(format!("adam.{g}.v"), vec![n, r], &a.v);
@@ -66,8 +74,11 @@ fn state_bytes(tr: &Trainer) -> Result<Vec<u8>> {
     for a in &st.aux {
         f(format!("aux.{}", a.name), vec![n, a.cols], &a.data);
     }
-    if let Some(node) = &tr.objects {
-        crate::objects::store::write_tensors(node, &mut f);
+    for node in tr.nodes.iter() {
+        node.save(&mut Sections {
+            tensors: &mut tensors,
+            meta: &mut meta,
+        });
     }
     tensors.push(("object".into(), Dtype::U8, vec![n], st.object.clone()));
     let order: Vec<u8> = tr.order.iter().flat_map(|x| x.to_le_bytes()).collect();
@@ -83,7 +94,6 @@ fn state_bytes(tr: &Trainer) -> Result<Vec<u8>> {
         vec![32],
         tr.rng.get_seed().to_vec(),
     ));
-    let mut meta = HashMap::new();
     meta.insert("format".to_string(), FORMAT.to_string());
     let aux: Vec<&str> = st.aux.iter().map(|a| a.name.as_str()).collect();
     meta.insert("aux".to_string(), aux.join(","));
@@ -97,15 +107,8 @@ fn state_bytes(tr: &Trainer) -> Result<Vec<u8>> {
         "rng.word_pos".to_string(),
         tr.rng.get_word_pos().to_string(),
     );
-    meta.insert(
-        "field.adam.step".to_string(),
-        tr.field_adam.step.to_string(),
-    );
     let steps: Vec<String> = st.adam.iter().map(|a| a.step.to_string()).collect();
     meta.insert("adam.steps".to_string(), steps.join(","));
-    if let Some(node) = &tr.objects {
-        meta.insert("objects".to_string(), crate::objects::store::metadata(node));
-    }
     let views: Vec<(String, safetensors::tensor::TensorView)> = tensors
         .iter()
         .map(|(name, dt, shape, data)| {
@@ -125,7 +128,7 @@ pub const KEEP_NAME: &str = "KEEP";
 /// marks of `log.checkpoint_minutes`); `why` is written into its `KEEP` file.
 pub fn save_kept(tr: &Trainer, run: &Path, why: &str) -> Result<PathBuf> {
     let dir = save(tr, run)?;
-    atomic_write(&dir.join(KEEP_NAME), why.as_bytes())?;
+    write_atomic(&dir.join(KEEP_NAME), why.as_bytes())?;
     Ok(dir)
 }
 
@@ -134,7 +137,7 @@ pub fn save_kept(tr: &Trainer, run: &Path, why: &str) -> Result<PathBuf> {
 /// ([`crate::fork`]) when present, and those saved by [`save_kept`]. Returns its folder.
 pub fn save(tr: &Trainer, run: &Path) -> Result<PathBuf> {
     // Never a checkpoint of a diverged state: the last good one stays `latest`.
-    if let Some(what) = crate::finite::locate(tr) {
+    if let Some(what) = tr.nonfinite() {
         return Err(TrainError::NonFinite {
             iteration: tr.iteration,
             what: format!("{what} (checkpoint not written)"),
@@ -152,8 +155,8 @@ pub fn save(tr: &Trainer, run: &Path) -> Result<PathBuf> {
         return Err(e);
     }
     let dst = install(&root, &name, &tmp)?;
-    atomic_write(&root.join("latest"), name.as_bytes())?;
-    let pinned = crate::fork::fork_point(&tr.cfg.reg).map(|i| format!("iter_{i:07}"));
+    write_atomic(&root.join("latest"), name.as_bytes())?;
+    let pinned = tr.cfg.reg.fork_point().map(|i| format!("iter_{i:07}"));
     prune_old(&root, &name, pinned.as_deref(), tr.cfg.log.keep_checkpoints);
     Ok(dst)
 }
@@ -161,11 +164,11 @@ pub fn save(tr: &Trainer, run: &Path) -> Result<PathBuf> {
 /// The files of a checkpoint of `tr`, written into the folder `dir`; `checksums.json` last.
 fn write_files(tr: &Trainer, dir: &Path) -> Result<()> {
     let ply = crate::ply::to_bytes(&tr.state.model);
-    atomic_write(&dir.join(PLY_NAME), &ply)?;
+    write_atomic(&dir.join(PLY_NAME), &ply)?;
     let state = state_bytes(tr)?;
-    atomic_write(&dir.join(STATE_NAME), &state)?;
+    write_atomic(&dir.join(STATE_NAME), &state)?;
     let config = tr.cfg.to_toml();
-    atomic_write(&dir.join(CONFIG_NAME), config.as_bytes())?;
+    write_atomic(&dir.join(CONFIG_NAME), config.as_bytes())?;
     crate::integrity::write(
         dir,
         (PLY_NAME, &tr.state.model, &ply),
@@ -438,23 +441,61 @@ pub fn read_config(dir: &Path) -> Result<TrainConfig> {
     TrainConfig::from_toml_file(&dir.join(CONFIG_NAME))
 }
 
+impl SectionReader for StateFile<'_> {
+    fn f32s(&self, name: &str, len: usize) -> Result<Vec<f32>> {
+        StateFile::f32s(self, name, len)
+    }
+
+    fn len_of(&self, name: &str) -> Option<usize> {
+        let t = self.st.tensor(name).ok()?;
+        Some(t.shape().iter().product())
+    }
+
+    fn meta(&self, key: &str) -> Option<&str> {
+        self.meta.get(key).map(String::as_str)
+    }
+
+    fn problem(&self, what: String) -> TrainError {
+        self.err(what)
+    }
+
+    fn config_file(&self) -> PathBuf {
+        self.path.with_file_name(CONFIG_NAME)
+    }
+}
+
 /// What render, eval and export need of a checkpoint.
 pub struct LoadedModel {
     pub cfg: TrainConfig,
     pub model: GaussianModel,
-    pub field: DeformField,
     pub iteration: u32,
-    /// The rigid objects (empty for runs without them) and the per-Gaussian object column.
-    pub objects: Vec<RigidObject>,
+    /// The object column (which node owns each Gaussian) and the nodes that place them.
     pub column: Vec<u8>,
+    pub nodes: Nodes,
 }
 
 impl LoadedModel {
-    pub fn objects_view(&self) -> ObjectsView<'_> {
-        ObjectsView {
-            objects: &self.objects,
+    /// The scene for [`crate::render`].
+    pub fn scene(&mut self) -> Scene<'_> {
+        Scene {
+            model: &self.model,
             column: &self.column,
+            nodes: &mut self.nodes,
+            iteration: self.iteration,
         }
+    }
+
+    /// The deformation field (every run has one).
+    pub fn field(&self) -> Option<&DeformField> {
+        let node = self.nodes.get::<crate::field_node::FieldNode>()?;
+        Some(&node.field)
+    }
+
+    /// The rigid objects (none for runs without them).
+    pub fn objects(&self) -> &[RigidObject] {
+        self.nodes
+            .get::<RigidObjects>()
+            .map_or(&[][..], |n| n.objects.as_slice())
     }
 
     /// Whether the field was past its warm-up at this checkpoint (before it, δ = 0).
@@ -463,13 +504,12 @@ impl LoadedModel {
     }
 }
 
-/// The model, field, objects and iteration of a checkpoint (for render/eval/export).
-pub fn load_model(dir: &Path) -> Result<LoadedModel> {
+/// Opens `dir/state.safetensors` after verifying the folder's checksums (checkpoints of
+/// format `-1`, from before them, load unverified).
+fn open_state(dir: &Path) -> Result<Vec<u8>> {
     let verified = crate::integrity::verify(dir)?;
-    let cfg = read_config(dir)?;
-    let mut model = crate::ply::read(&dir.join(PLY_NAME))?;
     let path = dir.join(STATE_NAME);
-    let bytes = crate::io::read(&path)?;
+    let bytes = crate::io::read_file(&path)?;
     let sf = parse_state(&bytes, &path)?;
     if !verified && sf.meta::<String>("format")? == FORMAT {
         let missing = crate::integrity::CHECKSUMS_NAME;
@@ -483,38 +523,59 @@ pub fn load_model(dir: &Path) -> Result<LoadedModel> {
             dir.display()
         );
     }
-    check_count(&sf, model.len(), &dir.join(PLY_NAME))?;
+    Ok(bytes)
+}
+
+/// The nodes of `cfg`, each with its section of `sf` read back (and its optimizer state
+/// when `dataset` is given: resuming training).
+fn read_nodes(
+    sf: &StateFile<'_>,
+    cfg: &TrainConfig,
+    dataset: Option<&scene::Dataset>,
+) -> Result<Nodes> {
+    // The state comes from the file: a throwaway stream for the constructors.
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let mut nodes = Nodes::build(NodeInit {
+        cfg,
+        dataset,
+        rng: &mut rng,
+    })?;
+    for node in nodes.iter_mut() {
+        node.load(sf)?;
+        if dataset.is_some() {
+            node.load_optimizer(sf)?;
+        }
+    }
+    Ok(nodes)
+}
+
+/// The model, nodes and iteration of a checkpoint (for render/eval/export).
+pub fn load_model(dir: &Path) -> Result<LoadedModel> {
+    let bytes = open_state(dir)?;
+    let sf = parse_state(&bytes, &dir.join(STATE_NAME))?;
+    let cfg = read_config(dir)?;
+    let (model, column) = read_rows(&sf, dir)?;
+    let nodes = read_nodes(&sf, &cfg, None)?;
+    check_column(&sf, &column, &nodes)?;
+    Ok(LoadedModel {
+        cfg,
+        model,
+        iteration: sf.meta("iteration")?,
+        column,
+        nodes,
+    })
+}
+
+/// The PLY's Gaussians (with the state's SH degree) and the object column.
+fn read_rows(sf: &StateFile<'_>, dir: &Path) -> Result<(GaussianModel, Vec<u8>)> {
+    let mut model = crate::ply::read(&dir.join(PLY_NAME))?;
+    check_count(sf, model.len(), &dir.join(PLY_NAME))?;
     model.sh_degree = sf.meta("sh_degree")?;
     if model.sh_degree > 3 {
         return Err(sf.err("sh_degree > 3"));
     }
-    let mut rng = ChaCha8Rng::seed_from_u64(0);
-    let mut field = DeformField::new(&cfg.field, &mut rng);
-    let want = field.mlp.num_params();
-    if let Ok(t) = sf.st.tensor("field.params") {
-        let got: usize = t.shape().iter().product();
-        if got != want {
-            // Either file may be the wrong one: name both.
-            return Err(sf.err(format!(
-                "tensor `field.params` holds {got} values, but the {}×{} field of {} has {want}",
-                cfg.field.depth,
-                cfg.field.width,
-                dir.join(CONFIG_NAME).display()
-            )));
-        }
-    }
-    field.mlp.params = sf.f32s("field.params", want)?;
-    let column = read_column(&sf, model.len())?;
-    let stored = read_objects(&sf)?;
-    check_column(&sf, &column, &stored.objects)?;
-    Ok(LoadedModel {
-        cfg,
-        model,
-        field,
-        iteration: sf.meta("iteration")?,
-        objects: stored.objects,
-        column,
-    })
+    let column = read_column(sf, model.len())?;
+    Ok((model, column))
 }
 
 /// The state's per-Gaussian rows (`stats.denom`, in every checkpoint) must be as many as
@@ -534,23 +595,21 @@ fn check_count(sf: &StateFile<'_>, n: usize, ply: &Path) -> Result<()> {
     Ok(())
 }
 
-/// The per-Gaussian object column (absent in runs from before objects: all background).
+/// The per-Gaussian object column (absent in runs from before objects: all the field's).
 fn read_column(sf: &StateFile<'_>, n: usize) -> Result<Vec<u8>> {
     if sf.st.tensor("object").is_err() {
-        return Ok(vec![crate::objects::NO_OBJECT; n]);
+        return Ok(vec![crate::state::NO_OBJECT; n]);
     }
     sf.bytes("object", Dtype::U8, n)
 }
 
-fn read_objects(sf: &StateFile<'_>) -> Result<crate::objects::store::Stored> {
-    let meta = sf.meta.get("objects").map(String::as_str);
-    crate::objects::store::read(meta, |name, len| sf.f32s(name, len), |p| sf.err(p))
-}
-
-/// Every object ID in the column names an object of the checkpoint.
-fn check_column(sf: &StateFile<'_>, column: &[u8], objects: &[RigidObject]) -> Result<()> {
-    let known = |id: u8| id == crate::objects::NO_OBJECT || objects.iter().any(|o| o.id == id);
-    match column.iter().position(|&id| !known(id)) {
+/// Every object ID in the column belongs to a node of the checkpoint.
+fn check_column(sf: &StateFile<'_>, column: &[u8], nodes: &Nodes) -> Result<()> {
+    let mut known = [false; 256];
+    for id in 0..=255u8 {
+        known[id as usize] = nodes.owns(id);
+    }
+    match column.iter().position(|&id| !known[id as usize]) {
         Some(i) => Err(sf.err(format!(
             "Gaussian {i} belongs to object {}, which the checkpoint does not describe",
             column[i]
@@ -574,24 +633,22 @@ fn parse_state<'a>(bytes: &'a [u8], path: &Path) -> Result<StateFile<'a>> {
     };
     let format: String = sf.meta("format")?;
     if format != FORMAT && format != FORMAT_UNVERIFIED {
-        return Err(sf.err(format!("format `{format}`, expected `{FORMAT}`")));
+        return Err(sf.err(format!(
+            "format `{format}`, expected `{FORMAT}` (or the older `{FORMAT_UNVERIFIED}`)"
+        )));
     }
     Ok(sf)
 }
 
 /// Rebuilds a trainer from a checkpoint folder so that training continues bit-identically.
 pub fn load_trainer(dir: &Path, dataset: scene::Dataset) -> Result<Trainer> {
-    let LoadedModel {
-        cfg,
-        model,
-        field,
-        iteration,
-        column,
-        ..
-    } = load_model(dir)?;
+    let bytes = open_state(dir)?;
     let path = dir.join(STATE_NAME);
-    let bytes = crate::io::read(&path)?;
     let sf = parse_state(&bytes, &path)?;
+    let cfg = read_config(dir)?;
+    let (model, column) = read_rows(&sf, dir)?;
+    let nodes = read_nodes(&sf, &cfg, Some(&dataset))?;
+    check_column(&sf, &column, &nodes)?;
     let n = model.len();
     let mut seed = [0u8; 32];
     seed.copy_from_slice(&sf.bytes("rng.seed", Dtype::U8, 32)?);
@@ -599,20 +656,26 @@ pub fn load_trainer(dir: &Path, dataset: scene::Dataset) -> Result<Trainer> {
     rng.set_stream(sf.meta("rng.stream")?);
     rng.set_word_pos(sf.meta("rng.word_pos")?);
     let extent: f32 = sf.meta("extent")?;
-    let mut tr = Trainer::assemble(cfg, dataset, model.clone(), field, rng, extent);
-    tr.iteration = iteration;
-    let p = tr.field.mlp.num_params();
-    tr.field_adam = Adam {
-        m: sf.f32s("field.adam.m", p)?,
-        v: sf.f32s("field.adam.v", p)?,
-        step: sf.meta("field.adam.step")?,
-    };
+    let mut tr = Trainer::assemble(cfg, dataset, model, nodes, rng, extent);
+    tr.iteration = sf.meta("iteration")?;
+    read_store(&sf, &mut tr.state, n)?;
+    tr.state.object = column;
+    // Checkpoints from before this key existed resume with the clock at zero.
+    tr.train_seconds = sf.meta_or("train_seconds", 0.0f64)?;
+    if !(tr.train_seconds.is_finite() && tr.train_seconds >= 0.0) {
+        return Err(sf.err("metadata `train_seconds` must be finite and ≥ 0"));
+    }
+    read_epoch(&sf, &mut tr)?;
+    Ok(tr)
+}
+
+/// The Gaussians' Adam moments and steps, densification statistics and hook rows.
+fn read_store(sf: &StateFile<'_>, state: &mut GaussianState, n: usize) -> Result<()> {
     let steps: String = sf.meta("adam.steps")?;
     let steps: Vec<u64> = steps.split(',').filter_map(|s| s.parse().ok()).collect();
     if steps.len() != 5 {
         return Err(sf.err("metadata `adam.steps` must list 5 integers"));
     }
-    let mut state = GaussianState::new(model);
     for (((a, g), r), s) in state.adam.iter_mut().zip(GROUPS).zip(ROWS).zip(steps) {
         a.m = sf.f32s(&format!("adam.{g}.m"), n * r)?;
         a.v = sf.f32s(&format!("adam.{g}.v"), n * r)?;
@@ -623,21 +686,12 @@ pub fn load_trainer(dir: &Path, dataset: scene::Dataset) -> Result<Trainer> {
         denom: sf.f32s("stats.denom", n)?,
         max_radii: sf.f32s("stats.max_radii", n)?,
     };
-    state.aux = read_aux(&sf, n)?;
-    state.object = column;
-    tr.state = state;
-    tr.objects = crate::objects::RigidObjects::for_run(&tr.cfg, &tr.dataset)?;
-    if let Some(node) = tr.objects.as_mut() {
-        let stored = read_objects(&sf)?;
-        node.started = stored.started;
-        node.objects = stored.objects;
-        node.knot_adam = stored.knot_adam;
-    }
-    // Checkpoints from before this key existed resume with the clock at zero.
-    tr.train_seconds = sf.meta_or("train_seconds", 0.0f64)?;
-    if !(tr.train_seconds.is_finite() && tr.train_seconds >= 0.0) {
-        return Err(sf.err("metadata `train_seconds` must be finite and ≥ 0"));
-    }
+    state.aux = read_aux(sf, n)?;
+    Ok(())
+}
+
+/// The epoch's frame order and the position in it.
+fn read_epoch(sf: &StateFile<'_>, tr: &mut Trainer) -> Result<()> {
     let len = sf
         .st
         .tensor("epoch.order")
@@ -655,7 +709,7 @@ pub fn load_trainer(dir: &Path, dataset: scene::Dataset) -> Result<Trainer> {
             "epoch order does not fit the data set's {n_train} training frames"
         )));
     }
-    Ok(tr)
+    Ok(())
 }
 
 #[cfg(test)]

@@ -1,23 +1,25 @@
-//! Every constant of training in one TOML-serializable struct. Defaults follow
+//! Every constant of training in one TOML-serializable struct, composed of one section per
+//! module: `[init]` ([`crate::init`]), `[field]` ([`crate::field`]), `[densify]`
+//! ([`crate::densify`]), `[loss]` ([`crate::loss`]), `[reg]` ([`crate::regularizer`]) and
+//! `[objects]` ([`crate::objects`]) are defined and validated beside the code that reads
+//! them; the loop's own sections (`[lr]`, `[sh]`, `[log]`) live here. Defaults follow
 //! Deformable-3DGS (Yang et al., CVPR 2024, `arguments/__init__.py`) and 3DGS
-//! (Kerbl et al. 2023) as listed in issue 5; unknown keys are rejected so a typo is an error,
-//! not a silently ignored setting.
+//! (Kerbl et al. 2023); unknown keys are rejected so a typo is an error, not a silently
+//! ignored setting.
 
-use crate::error::{Result, TrainError};
+use crate::error::{check, Result, TrainError};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+
+pub use crate::densify::{DensifyConfig, MAX_SPLIT_CHILDREN};
+pub use crate::field::{FieldConfig, MAX_FIELD_PARAMS};
+pub use crate::init::{InitConfig, MAX_RANDOM_POINTS};
+pub use crate::loss::LossConfig;
 
 /// Smallest densification interval `--iters` rescales to (3DGS's own: 100 views).
 pub const MIN_DENSIFY_INTERVAL: u32 = 100;
 /// Smallest opacity-reset interval `--iters` rescales to.
 pub const MIN_OPACITY_RESET_INTERVAL: u32 = 1000;
-/// Upper bounds that keep a config's allocations finite (a bad value is refused, not an
-/// abort on a failed allocation): the deformation MLP's parameter count (2^26 = 67M, 256
-/// MiB of f32 before Adam's two moments; the faithful field has 0.6M), the random
-/// initialization's points (3DGS uses 100k) and the children per split Gaussian (3DGS: 2).
-pub const MAX_FIELD_PARAMS: usize = 1 << 26;
-pub const MAX_RANDOM_POINTS: usize = 50_000_000;
-pub const MAX_SPLIT_CHILDREN: usize = 64;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -36,54 +38,6 @@ pub struct TrainConfig {
     /// Rigid objects (our extension beyond the paper, docs/objects.md); off unless enabled
     /// here or by `--objects`.
     pub objects: crate::objects::ObjectsConfig,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct InitConfig {
-    /// Use the scene's point cloud when it has one; otherwise random points.
-    pub use_point_cloud: bool,
-    /// Random init: number of points uniform in [−extent, extent]³ (3DGS synthetic: 100k, 1.3).
-    pub random_points: usize,
-    pub random_extent: f32,
-    /// Initial opacity (3DGS: 0.1).
-    pub opacity: f32,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct FieldConfig {
-    /// Hidden ReLU layers (Deformable-3DGS: D = 8) and their width (W = 256).
-    pub depth: usize,
-    pub width: usize,
-    /// The encoded input is concatenated to the output of this hidden layer (D/2 = 4 in
-    /// Deformable-3DGS, `skips = [D // 2]`); ≥ depth − 1 disables the skip.
-    pub skip: usize,
-    /// Positional-encoding frequencies of the mean (10) and of t (6 synthetic / 10 real).
-    pub pos_freqs: usize,
-    pub time_freqs: usize,
-    /// Iterations with δ = 0 before the field is used (Deformable-3DGS `warm_up`: 3k).
-    pub warm_up: u32,
-    /// Evaluate the field only for Gaussians whose canonical mean projects inside the view
-    /// enlarged by `visible_margin` (fraction of the image size); others get δ = 0 this step.
-    pub visible_only: bool,
-    pub visible_margin: f32,
-    /// Apply the field's scale offset δs (Deformable-3DGS: yes). Off, the Gaussians keep their
-    /// size over time: the field can move and turn them but not shrink them out of view, the
-    /// "flip-book" of docs/regularizer.md. δx and δr are unaffected.
-    pub deform_scale: bool,
-    /// Deformable-3DGS's time network for D-NeRF scenes (`is_blender`): γ(t) → Linear(·,
-    /// `time_net_width`) → ReLU → Linear(·, `time_net_out`) replaces γ(t) in the field's
-    /// input (`crate::time_net`). 0 = off, γ(t) goes in directly (the official non-D-NeRF
-    /// path). Official: 256 → 30.
-    pub time_net_width: usize,
-    pub time_net_out: usize,
-    /// Factor on the head's PyTorch-default initial weights and bias (1 = Deformable-3DGS;
-    /// our default 0).
-    /// With a small field the default head moves every Gaussian by its own ~0.1 units the
-    /// moment the field starts (8×256: a near-uniform ~0.05 shift; docs/fidelity.md,
-    /// "Field start"); 0 starts the field at δ = 0, and it learns from there.
-    pub head_init_scale: f32,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -111,47 +65,9 @@ pub struct LrConfig {
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct DensifyConfig {
-    /// Which Gaussians exist (docs/training.md "Density control"): `adaptive` is 3DGS's
-    /// clone/split/prune with opacity resets, as Deformable-3DGS trains (the faithful
-    /// default); `mcmc` is 3DGS-MCMC (Kheradmand et al. 2024, as gsplat's `MCMCStrategy`):
-    /// a hard cap, dead Gaussians relocated onto live ones, noise on near-transparent ones.
-    pub strategy: crate::densify::Strategy,
-    /// Refinement runs at iterations `from < it < until` that are multiples of `interval`
-    /// (`mcmc` ends at `mcmc.until` instead).
-    pub from: u32,
-    pub until: u32,
-    pub interval: u32,
-    /// Threshold on the mean view-space gradient norm in 3DGS NDC units.
-    pub grad_threshold: f32,
-    pub percent_dense: f32,
-    pub min_opacity: f32,
-    /// Prune Gaussians whose screen radius exceeded this many pixels, once past
-    /// `screen_size_after` iterations (3DGS: 20 px after the first opacity reset).
-    pub screen_size: f32,
-    pub screen_size_after: u32,
-    /// Prune Gaussians larger than this fraction of the scene extent.
-    pub world_size_factor: f32,
-    pub opacity_reset_interval: u32,
-    pub reset_opacity: f32,
-    /// Children per split Gaussian (3DGS: 2), scaled down by 1/(0.8·children).
-    pub split_children: usize,
-    /// The `mcmc` strategy's constants (ignored by `adaptive`).
-    pub mcmc: crate::densify::McmcConfig,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
 pub struct ShConfig {
     pub max_degree: usize,
     pub degree_interval: u32,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct LossConfig {
-    /// `L = (1 − λ)·L1 + λ·(1 − SSIM)` (3DGS: λ = 0.2).
-    pub lambda_dssim: f32,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -196,65 +112,6 @@ impl Default for TrainConfig {
     }
 }
 
-impl Default for InitConfig {
-    fn default() -> Self {
-        Self {
-            use_point_cloud: true,
-            random_points: 100_000,
-            random_extent: 1.3,
-            opacity: 0.1,
-        }
-    }
-}
-
-impl FieldConfig {
-    /// Width of the field's time input: the time network's output, or γ(t) without one.
-    pub fn time_input_dim(&self) -> usize {
-        if self.time_net_width > 0 {
-            self.time_net_out
-        } else {
-            crate::encoding::encoded_dim(1, self.time_freqs)
-        }
-    }
-
-    /// Deformable-3DGS's network for D-NeRF exactly (`is_blender`): 8 × 256, skip after
-    /// layer 4, γ(t) with 6 frequencies through the 256 → 30 time network, on every Gaussian.
-    pub fn faithful() -> Self {
-        Self {
-            depth: 8,
-            width: 256,
-            skip: 4,
-            pos_freqs: 10,
-            time_freqs: 6,
-            warm_up: 3000,
-            visible_only: false,
-            visible_margin: 0.15,
-            deform_scale: true,
-            time_net_width: 256,
-            time_net_out: 30,
-            head_init_scale: 1.0,
-        }
-    }
-}
-
-impl Default for FieldConfig {
-    fn default() -> Self {
-        // Faster default justified in docs/performance.md ("Training"): the faithful
-        // 8×256 field costs more than the whole 60-minute budget on 2 cores.
-        Self {
-            depth: 4,
-            width: 64,
-            skip: 2,
-            visible_only: true,
-            time_net_width: 0,
-            // A small field's default head scatters the Gaussians at its start (lego val
-            // +2.18 dB, toycars +0.08/+0.13 dB with a zero head: docs/fidelity.md §2–3).
-            head_init_scale: 0.0,
-            ..Self::faithful()
-        }
-    }
-}
-
 impl Default for LrConfig {
     fn default() -> Self {
         Self {
@@ -277,39 +134,12 @@ impl Default for LrConfig {
     }
 }
 
-impl Default for DensifyConfig {
-    fn default() -> Self {
-        Self {
-            from: 500,
-            until: 15_000,
-            interval: 100,
-            grad_threshold: 2e-4,
-            percent_dense: 0.01,
-            min_opacity: 0.005,
-            screen_size: 20.0,
-            screen_size_after: 3000,
-            world_size_factor: 0.1,
-            opacity_reset_interval: 3000,
-            reset_opacity: 0.01,
-            split_children: 2,
-            strategy: crate::densify::Strategy::Adaptive,
-            mcmc: crate::densify::McmcConfig::default(),
-        }
-    }
-}
-
 impl Default for ShConfig {
     fn default() -> Self {
         Self {
             max_degree: 3,
             degree_interval: 1000,
         }
-    }
-}
-
-impl Default for LossConfig {
-    fn default() -> Self {
-        Self { lambda_dssim: 0.2 }
     }
 }
 
@@ -441,101 +271,47 @@ impl TrainConfig {
         Ok(c)
     }
 
-    /// Rejects values that would make training meaningless or crash, naming the key.
+    /// Rejects values that would make training meaningless or crash, naming the key; each
+    /// section checks its own keys.
     pub fn validate(&self) -> Result<()> {
-        let pos = |name: &str, v: f32| -> Result<()> {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(TrainError::config(
-                    name,
-                    format!("must be finite and > 0, got {v}"),
-                ))
-            }
-        };
-        let unit = |name: &str, v: f32| -> Result<()> {
-            if v.is_finite() && (0.0..=1.0).contains(&v) {
-                Ok(())
-            } else {
-                Err(TrainError::config(
-                    name,
-                    format!("must be in [0, 1], got {v}"),
-                ))
-            }
-        };
-        let nonzero = |name: &str, v: u64| -> Result<()> {
-            if v > 0 {
-                Ok(())
-            } else {
-                Err(TrainError::config(name, "must be ≥ 1"))
-            }
-        };
-        nonzero("iterations", self.iterations as u64)?;
-        let i = &self.init;
-        pos("init.random_extent", i.random_extent)?;
-        if i.random_points > MAX_RANDOM_POINTS {
+        check::at_least_one("iterations", self.iterations as u64)?;
+        self.init.validate()?;
+        self.field.validate()?;
+        self.lr.validate()?;
+        self.densify.validate()?;
+        if self.sh.max_degree > 3 {
             return Err(TrainError::config(
-                "init.random_points",
-                format!("must be ≤ {MAX_RANDOM_POINTS}, got {}", i.random_points),
+                "sh.max_degree",
+                format!("must be ≤ 3, got {}", self.sh.max_degree),
             ));
         }
-        if !(i.opacity > 0.0 && i.opacity < 1.0) {
+        check::at_least_one("sh.degree_interval", self.sh.degree_interval as u64)?;
+        if let Some(m) = self
+            .log
+            .checkpoint_minutes
+            .iter()
+            .find(|m| !(m.is_finite() && **m > 0.0))
+        {
             return Err(TrainError::config(
-                "init.opacity",
-                format!("must be in (0, 1), got {}", i.opacity),
+                "log.checkpoint_minutes",
+                format!("must be finite and > 0, got {m}"),
             ));
         }
-        let f = &self.field;
-        nonzero("field.depth", f.depth as u64)?;
-        nonzero("field.width", f.width as u64)?;
-        if f.pos_freqs > 30 || f.time_freqs > 30 {
-            return Err(TrainError::config(
-                "field.pos_freqs/time_freqs",
-                "must be ≤ 30 (2^f overflows f32 precision)",
-            ));
-        }
-        // Checked before anything is allocated: a config (or a checkpoint's config.toml)
-        // asking for a 10^9-wide field would otherwise abort the process in `Mlp::new`.
-        if f.time_net_width > 0 && f.time_net_out == 0 {
-            return Err(TrainError::config(
-                "field.time_net_out",
-                "must be > 0 when field.time_net_width is (0 width turns the time network off)",
-            ));
-        }
-        if f.time_net_width > 4096 || f.time_net_out > 4096 {
-            return Err(TrainError::config(
-                "field.time_net_width/time_net_out",
-                "must be ≤ 4096 (Deformable-3DGS: 256 and 30)",
-            ));
-        }
-        let in_dim = crate::encoding::encoded_dim(3, f.pos_freqs) + f.time_input_dim();
-        // An upper bound of `Mlp::new`'s count: (depth + 1) layers of at most
-        // (in + width + 1) inputs (skip and bias included) × max(width, head) outputs.
-        let params = (f.width.checked_add(in_dim + 1))
-            .and_then(|fan_in| fan_in.checked_mul(f.width.max(crate::field::HEAD)))
-            .and_then(|layer| layer.checked_mul(f.depth.checked_add(1)?));
-        if params.is_none_or(|p| p > MAX_FIELD_PARAMS) {
-            return Err(TrainError::config(
-                "field.depth/width",
-                format!(
-                    "a {}×{} field has over {MAX_FIELD_PARAMS} parameters (the faithful 8×256 has 0.6M)",
-                    f.depth, f.width
-                ),
-            ));
-        }
-        if !(f.head_init_scale.is_finite() && f.head_init_scale >= 0.0) {
-            return Err(TrainError::config(
-                "field.head_init_scale",
-                format!("must be finite and ≥ 0, got {}", f.head_init_scale),
-            ));
-        }
-        if !(f.visible_margin.is_finite() && f.visible_margin >= 0.0) {
-            return Err(TrainError::config(
-                "field.visible_margin",
-                format!("must be ≥ 0, got {}", f.visible_margin),
-            ));
-        }
-        let l = &self.lr;
+        self.loss.validate()?;
+        self.reg
+            .validate()
+            .map_err(|e| TrainError::config("reg", e.to_string()))?;
+        self.objects
+            .validate()
+            .map_err(|e| TrainError::config("objects", e))?;
+        Ok(())
+    }
+}
+
+impl LrConfig {
+    /// Learning rates finite and ≥ 0 (> 0 where a schedule divides by them), betas in [0, 1).
+    fn validate(&self) -> Result<()> {
+        let l = self;
         for (n, v) in [
             ("lr.position_init", l.position_init),
             ("lr.position_final", l.position_final),
@@ -544,7 +320,7 @@ impl TrainConfig {
             ("lr.field_final", l.field_final),
             ("lr.adam_eps", l.adam_eps),
         ] {
-            pos(n, v)?;
+            check::positive(n, v)?;
         }
         for (n, v) in [
             ("lr.sh_dc", l.sh_dc),
@@ -567,61 +343,8 @@ impl TrainConfig {
                 "must be in [0, 1)",
             ));
         }
-        nonzero("lr.position_max_steps", l.position_max_steps as u64)?;
-        nonzero("lr.field_max_steps", l.field_max_steps as u64)?;
-        let d = &self.densify;
-        nonzero("densify.interval", d.interval as u64)?;
-        nonzero(
-            "densify.opacity_reset_interval",
-            d.opacity_reset_interval as u64,
-        )?;
-        pos("densify.grad_threshold", d.grad_threshold)?;
-        unit("densify.percent_dense", d.percent_dense)?;
-        unit("densify.min_opacity", d.min_opacity)?;
-        pos("densify.screen_size", d.screen_size)?;
-        pos("densify.world_size_factor", d.world_size_factor)?;
-        if !(d.reset_opacity > 0.0 && d.reset_opacity < 1.0) {
-            return Err(TrainError::config(
-                "densify.reset_opacity",
-                format!("must be in (0, 1), got {}", d.reset_opacity),
-            ));
-        }
-        nonzero("densify.split_children", d.split_children as u64)?;
-        d.mcmc
-            .validate()
-            .map_err(|(key, why)| TrainError::config(&format!("densify.mcmc.{key}"), why))?;
-        if d.split_children > MAX_SPLIT_CHILDREN {
-            return Err(TrainError::config(
-                "densify.split_children",
-                format!("must be ≤ {MAX_SPLIT_CHILDREN}, got {}", d.split_children),
-            ));
-        }
-        if self.sh.max_degree > 3 {
-            return Err(TrainError::config(
-                "sh.max_degree",
-                format!("must be ≤ 3, got {}", self.sh.max_degree),
-            ));
-        }
-        nonzero("sh.degree_interval", self.sh.degree_interval as u64)?;
-        if let Some(m) = self
-            .log
-            .checkpoint_minutes
-            .iter()
-            .find(|m| !(m.is_finite() && **m > 0.0))
-        {
-            return Err(TrainError::config(
-                "log.checkpoint_minutes",
-                format!("must be finite and > 0, got {m}"),
-            ));
-        }
-        unit("loss.lambda_dssim", self.loss.lambda_dssim)?;
-        self.reg
-            .validate()
-            .map_err(|e| TrainError::config("reg", e.to_string()))?;
-        self.objects
-            .validate()
-            .map_err(|e| TrainError::config("objects", e))?;
-        Ok(())
+        check::at_least_one("lr.position_max_steps", l.position_max_steps as u64)?;
+        check::at_least_one("lr.field_max_steps", l.field_max_steps as u64)
     }
 }
 
@@ -663,7 +386,7 @@ mod tests {
         assert_eq!(c.log.eval_split, EvalSplit::Val);
     }
 
-    /// Found by the disk-full test: `--iters 5` rescaled `objects.start_iter` to 0.
+    /// The shortest schedules too: `objects.start_iter` must not round to 0.
     #[test]
     fn every_short_schedule_rescales_to_a_valid_config() {
         for n in 1..=64 {

@@ -4,8 +4,9 @@
 //! itself.
 
 use crate::field::DeformOutput;
-use crate::model::GaussianModel;
+use crate::model::{GaussianModel, SH_COEFFS};
 use rayon::prelude::*;
+use splat::{Colors, Gaussians};
 
 /// Deformed means, quaternions and linear scales handed to the rasterizer.
 #[derive(Clone, Debug, Default)]
@@ -32,6 +33,15 @@ fn normalize4(q: &[f32]) -> ([f32; 4], f32) {
 
 /// Fills `out` with the deformed parameters; `delta = None` means δ = 0 (warm-up).
 pub fn apply(model: &GaussianModel, delta: Option<&DeformOutput>, out: &mut Deformed) {
+    rest(model, out);
+    if let Some(d) = delta {
+        add_delta(d, out);
+    }
+}
+
+/// Fills `out` with every Gaussian at rest: mean, normalize(q), exp(log_scale). The nodes
+/// then place their own rows from here.
+pub fn rest(model: &GaussianModel, out: &mut Deformed) {
     let n = model.len();
     out.means.resize(n * 3, 0.0);
     out.quats.resize(n * 4, 0.0);
@@ -50,22 +60,41 @@ pub fn apply(model: &GaussianModel, delta: Option<&DeformOutput>, out: &mut Defo
         .par_chunks_mut(4)
         .zip(model.quats.par_chunks(4))
         .for_each(|(o, q)| o.copy_from_slice(&normalize4(q).0));
-    if let Some(d) = delta {
-        for (a, b) in [
-            (&mut out.means, &d.dx),
-            (&mut out.quats, &d.dr),
-            (&mut out.scales, &d.ds),
-        ] {
-            a.par_iter_mut()
-                .zip(b.par_iter())
-                .for_each(|(x, y)| *x += y);
-        }
+}
+
+/// Adds the field's δ to a rest placement: mean + δx, normalize(q) + δr,
+/// exp(log_scale) + δs (zero where the field was not evaluated).
+pub fn add_delta(d: &DeformOutput, out: &mut Deformed) {
+    for (a, b) in [
+        (&mut out.means, &d.dx),
+        (&mut out.quats, &d.dr),
+        (&mut out.scales, &d.ds),
+    ] {
+        a.par_iter_mut()
+            .zip(b.par_iter())
+            .for_each(|(x, y)| *x += y);
+    }
+}
+
+/// The rasterizer's view of canonical colours and opacities with placed geometry.
+pub fn gaussians<'a>(model: &'a GaussianModel, d: &'a Deformed) -> Gaussians<'a> {
+    Gaussians {
+        means: &d.means,
+        quats: &d.quats,
+        scales: &d.scales,
+        opacity_logits: &model.opacity_logits,
+        colors: Colors::Sh {
+            coeffs: &model.sh,
+            num_coeffs: SH_COEFFS,
+            degree: model.sh_degree,
+        },
     }
 }
 
 /// Chains the rasterizer's gradients w.r.t. the deformed means/quats/scales back to the
-/// canonical parameters. `dL/dδ` equals those same gradients (δ enters additively), so
-/// the caller hands them to the field directly.
+/// canonical parameters as if every Gaussian were placed at rest plus δ; a node that places
+/// its rows otherwise overwrites them after. `dL/dδ` equals those same gradients (δ enters
+/// additively), so the field's node hands them to the field directly.
 pub fn backward(
     model: &GaussianModel,
     g_means: &[f32],

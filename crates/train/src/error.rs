@@ -84,3 +84,52 @@ impl TrainError {
 }
 
 pub type Result<T> = std::result::Result<T, TrainError>;
+
+/// `scene`'s file helpers (atomic writes) report I/O failures as this crate's own
+/// [`TrainError::Io`], naming the file.
+impl From<scene::SceneError> for TrainError {
+    fn from(e: scene::SceneError) -> Self {
+        match e {
+            scene::SceneError::Io { path, source } => TrainError::Io { path, source },
+            other => TrainError::Data(other.to_string()),
+        }
+    }
+}
+
+/// Checks shared by the config sections' `validate`, each naming the key it refuses.
+pub(crate) mod check {
+    use super::{Result, TrainError};
+
+    /// Finite and > 0.
+    pub fn positive(name: &str, v: f32) -> Result<()> {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(TrainError::config(
+                name,
+                format!("must be finite and > 0, got {v}"),
+            ))
+        }
+    }
+
+    /// Finite and in [0, 1].
+    pub fn unit(name: &str, v: f32) -> Result<()> {
+        if v.is_finite() && (0.0..=1.0).contains(&v) {
+            Ok(())
+        } else {
+            Err(TrainError::config(
+                name,
+                format!("must be in [0, 1], got {v}"),
+            ))
+        }
+    }
+
+    /// ≥ 1.
+    pub fn at_least_one(name: &str, v: u64) -> Result<()> {
+        if v > 0 {
+            Ok(())
+        } else {
+            Err(TrainError::config(name, "must be ≥ 1"))
+        }
+    }
+}

@@ -1,11 +1,12 @@
-//! Divergence (issue 19, item 3): a loss or parameter that turns NaN/Inf stops the run with
-//! the iteration and the parameter group named, before anything non-finite reaches a
-//! checkpoint. The optimizer reports for free whether every value it wrote is finite
-//! ([`crate::adam::Adam::step_rows`]); [`locate`] then finds where (it scans the state, so
-//! it runs only when something is already wrong, and before each checkpoint is written).
+//! Divergence: a loss or parameter that turns NaN/Inf stops the run with the iteration and
+//! the parameter group named, before anything non-finite reaches a checkpoint. The
+//! optimizer reports for free whether every value it wrote is finite
+//! ([`crate::adam::Adam::step_rows`]); the scans here then find where (they run only when
+//! something is already wrong, and before each checkpoint is written). Each node scans its
+//! own parameters ([`crate::node::Node::nonfinite`]); [`locate_store`] scans the Gaussians.
 
 use crate::model::ROWS;
-use crate::trainer::Trainer;
+use crate::state::GaussianState;
 
 const GROUPS: [&str; 5] = ["means", "quats", "log_scales", "opacity_logits", "sh"];
 
@@ -19,10 +20,9 @@ pub fn first_nonfinite(v: &[f32]) -> Option<usize> {
     })
 }
 
-/// The first non-finite value in what training updates, named (group, and row when the
-/// group has one per Gaussian); `None` when everything is finite.
-pub fn locate(tr: &Trainer) -> Option<String> {
-    let st = &tr.state;
+/// The first non-finite Gaussian parameter or Adam moment of the store, named (group, and
+/// the Gaussian's row); `None` when everything is finite.
+pub fn locate_store(st: &GaussianState) -> Option<String> {
     let m = &st.model;
     let n = st.len();
     let params = [&m.means, &m.quats, &m.log_scales, &m.opacity_logits, &m.sh];
@@ -34,9 +34,6 @@ pub fn locate(tr: &Trainer) -> Option<String> {
             ));
         }
     }
-    if let Some(i) = first_nonfinite(&tr.field.mlp.params) {
-        return Some(format!("deformation-field weight {i}"));
-    }
     for ((g, a), r) in GROUPS.iter().zip(&st.adam).zip(ROWS) {
         for (which, v) in [("first", &a.m), ("second", &a.v)] {
             if let Some(i) = first_nonfinite(v) {
@@ -47,35 +44,7 @@ pub fn locate(tr: &Trainer) -> Option<String> {
             }
         }
     }
-    for (which, v) in [("first", &tr.field_adam.m), ("second", &tr.field_adam.v)] {
-        if let Some(i) = first_nonfinite(v) {
-            return Some(format!(
-                "Adam {which} moment of deformation-field weight {i}"
-            ));
-        }
-    }
-    locate_objects(tr)
-}
-
-/// A non-finite knot of a rigid object's trajectory (a few hundred floats: cheap enough
-/// to test every iteration).
-pub fn locate_objects(tr: &Trainer) -> Option<String> {
-    let node = tr.objects.as_ref()?;
-    node.objects.iter().find_map(|o| {
-        let t = &o.trajectory;
-        let bad = |k: usize| {
-            t.translations[k]
-                .iter()
-                .chain(&t.rotations[k])
-                .any(|x| !x.is_finite())
-        };
-        (0..t.translations.len()).find(|&k| bad(k)).map(|k| {
-            format!(
-                "trajectory of object `{}` (knot {k}, t = {})",
-                o.name, t.times[k]
-            )
-        })
-    })
+    None
 }
 
 #[cfg(test)]

@@ -15,10 +15,7 @@ use std::path::{Path, PathBuf};
 /// The last iteration at which the regularizer of `reg` is still off (`start_iter − 1`);
 /// `None` when it is on from the first iteration. Runs keep their checkpoint here.
 pub fn fork_point(reg: &RegConfig) -> Option<u32> {
-    u32::try_from(reg.start_iter)
-        .ok()
-        .and_then(|s| s.checked_sub(1))
-        .filter(|&p| p >= 1)
+    reg.fork_point()
 }
 
 /// Why a checkpoint at `iteration` trained with `src` cannot start a run with `dst`.

@@ -3,11 +3,59 @@
 //! SH DC = RGB2SH(colour), SH rest 0. Random init as 3DGS/Deformable-3DGS on synthetic
 //! scenes: points uniform in [−e, e]³ with colours uniform in [0, 1/255) read as SH.
 
-use crate::config::InitConfig;
+use crate::error::{check, Result, TrainError};
 use crate::model::{inverse_sigmoid, GaussianModel, SH_FLOATS};
 use rand::Rng;
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
+
+/// Most random points a config may ask for: keeps the allocation finite (a bad value is
+/// refused, not an abort on a failed allocation; 3DGS uses 100k).
+pub const MAX_RANDOM_POINTS: usize = 50_000_000;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InitConfig {
+    /// Use the scene's point cloud when it has one; otherwise random points.
+    pub use_point_cloud: bool,
+    /// Random init: number of points uniform in [−extent, extent]³ (3DGS synthetic: 100k, 1.3).
+    pub random_points: usize,
+    pub random_extent: f32,
+    /// Initial opacity (3DGS: 0.1).
+    pub opacity: f32,
+}
+
+impl Default for InitConfig {
+    fn default() -> Self {
+        Self {
+            use_point_cloud: true,
+            random_points: 100_000,
+            random_extent: 1.3,
+            opacity: 0.1,
+        }
+    }
+}
+
+impl InitConfig {
+    /// `[init]`'s keys, named when wrong.
+    pub fn validate(&self) -> Result<()> {
+        check::positive("init.random_extent", self.random_extent)?;
+        if self.random_points > MAX_RANDOM_POINTS {
+            return Err(TrainError::config(
+                "init.random_points",
+                format!("must be ≤ {MAX_RANDOM_POINTS}, got {}", self.random_points),
+            ));
+        }
+        if !(self.opacity > 0.0 && self.opacity < 1.0) {
+            return Err(TrainError::config(
+                "init.opacity",
+                format!("must be in (0, 1), got {}", self.opacity),
+            ));
+        }
+        Ok(())
+    }
+}
 
 /// SH band-0 constant (3DGS `C0`).
 pub const SH_C0: f32 = 0.282_094_8;

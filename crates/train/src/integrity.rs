@@ -1,4 +1,4 @@
-//! What makes a checkpoint trustworthy (issue 19, item 3): a CRC-32 of every file and of
+//! What makes a checkpoint trustworthy: a CRC-32 of every file and of
 //! every tensor inside it, written last into `checksums.json` and verified on every load,
 //! so a flipped bit or a truncated write is refused with the file and tensor named rather
 //! than trained on. A bit flip inside an Adam moment is finite and would otherwise go
@@ -129,7 +129,7 @@ pub fn verify(dir: &Path) -> Result<bool> {
     }
     for (file, want) in &sums.files {
         let p = dir.join(file);
-        let bytes = crate::io::read(&p)?;
+        let bytes = crate::io::read_file(&p)?;
         if &crc_hex(&bytes) != want {
             return Err(bad(dir, file, locate(dir, file, &bytes, &sums)));
         }
@@ -157,5 +157,5 @@ pub fn write(
         }
     }
     let text = serde_json::to_string_pretty(&sums).expect("plain data serializes");
-    crate::io::atomic_write(&dir.join(CHECKSUMS_NAME), text.as_bytes())
+    crate::io::write_atomic(&dir.join(CHECKSUMS_NAME), text.as_bytes())
 }

@@ -1,36 +1,23 @@
-//! Atomic file writes: write a sibling temporary file, flush it to disk, then rename, so a
-//! crash or Ctrl-C never leaves a half-written file under the final name.
+//! File access for checkpoints and run folders, errors naming the file. Atomic writes are
+//! `scene`'s one implementation ([`scene::io::write_atomic`]: a temporary file beside the
+//! target, synced, then renamed, so a crash or Ctrl-C never leaves a half-written file
+//! under the final name).
 
 use crate::error::{Result, TrainError};
-use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-fn tmp_path(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    path.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+/// Writes `bytes` to `path` atomically ([`scene::io::write_atomic`]: a temporary file
+/// beside it, synced, then renamed).
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    Ok(scene::io::write_atomic(path, |w| w.write_all(bytes))?)
 }
 
-pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = tmp_path(path);
-    let write = || -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    };
-    write().map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        TrainError::io(path, e)
-    })
-}
-
-pub fn read(path: &Path) -> Result<Vec<u8>> {
+/// Reads a whole file, naming it on failure.
+pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).map_err(|e| TrainError::io(path, e))
 }
 
-pub fn create_dir_all(path: &Path) -> Result<()> {
+/// Creates a folder and its parents, naming it on failure.
+pub(crate) fn create_dir_all(path: &Path) -> Result<()> {
     std::fs::create_dir_all(path).map_err(|e| TrainError::io(path, e))
 }

@@ -1,11 +1,13 @@
 //! `train`: the deformable 3D Gaussian Splatting trainer (Yang et al., CVPR 2024), the
 //! SemDynReg paper's baseline, on the CPU rasterizer of `splat` (docs/architecture.md).
 //!
-//! Pieces, in data-flow order: [`model`] (raw canonical Gaussians) and [`state`] (with their
-//! Adam moments and densification statistics, kept row-aligned), [`init`], [`encoding`] +
-//! [`mlp`] = [`field`] (the deformation field), [`deform`] (δ applied and chained back),
-//! [`adam`], [`densify`], the training loop in [`trainer`], and [`checkpoint`]/[`ply`] on disk;
-//! [`fork`] starts a run from another's checkpoint at the regularizer's start.
+//! Pieces, in data-flow order: [`model`] (raw canonical Gaussians) and [`state`] (the one
+//! Gaussian store, with their Adam moments, densification statistics and object column,
+//! kept row-aligned), [`init`]; the scene model's [`node`] interface and its kinds,
+//! registered in [`nodes`]: [`field_node`] ([`encoding`] + [`mlp`] = [`field`], the
+//! deformation field, applied by [`deform`]) and [`objects`] (rigid objects); [`adam`],
+//! [`densify`], the training loop in [`trainer`], [`render`], and [`checkpoint`]/[`ply`] on
+//! disk; [`fork`] starts a run from another's checkpoint at the regularizer's start.
 
 pub mod adam;
 pub mod checkpoint;
@@ -17,6 +19,7 @@ mod error;
 #[cfg(test)]
 mod fd_check;
 pub mod field;
+pub mod field_node;
 pub mod finite;
 pub mod fork;
 mod gemm_util;
@@ -28,6 +31,8 @@ mod io;
 pub mod loss;
 pub mod mlp;
 pub mod model;
+pub mod node;
+pub mod nodes;
 pub mod objects;
 pub mod ply;
 pub mod quat;

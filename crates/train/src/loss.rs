@@ -1,7 +1,29 @@
 //! Photometric loss of 3DGS/Deformable-3DGS: `(1−λ)·L1 + λ·(1 − SSIM)` (λ = 0.2), with
 //! SSIM 11×11, σ = 1.5 from `metrics` (the 3DGS variant), and its gradient w.r.t. the render.
 
+use crate::error::{check, Result};
 use metrics::SsimWorkspace;
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LossConfig {
+    /// `L = (1 − λ)·L1 + λ·(1 − SSIM)` (3DGS: λ = 0.2).
+    pub lambda_dssim: f32,
+}
+
+impl Default for LossConfig {
+    fn default() -> Self {
+        Self { lambda_dssim: 0.2 }
+    }
+}
+
+impl LossConfig {
+    /// `[loss]`'s keys, named when wrong.
+    pub fn validate(&self) -> Result<()> {
+        check::unit("loss.lambda_dssim", self.lambda_dssim)
+    }
+}
 
 #[derive(Default)]
 pub struct PhotoLoss {

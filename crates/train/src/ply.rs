@@ -56,7 +56,7 @@ pub fn to_bytes(m: &GaussianModel) -> Vec<u8> {
 }
 
 pub fn write(path: &Path, m: &GaussianModel) -> Result<()> {
-    crate::io::atomic_write(path, &to_bytes(m))
+    crate::io::write_atomic(path, &to_bytes(m))
 }
 
 struct Header {
@@ -119,7 +119,7 @@ fn parse_header(bytes: &[u8], err: &dyn Fn(String) -> TrainError) -> Result<Head
 /// Reads a 3DGS PLY. Missing `f_rest_*` means SH degree 0; the active degree is set from
 /// how many are present. Extra float properties are ignored.
 pub fn read(path: &Path) -> Result<GaussianModel> {
-    let bytes = crate::io::read(path)?;
+    let bytes = crate::io::read_file(path)?;
     let err = |problem: String| TrainError::Ply {
         path: path.to_path_buf(),
         problem,

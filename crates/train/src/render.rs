@@ -1,21 +1,48 @@
-//! Rendering and evaluating a trained model at any time t (no gradients): the same
-//! deformation as training (`visible_only` rule included, so views match what was trained),
-//! PSNR and 3DGS-SSIM per frame, and the deformed Gaussians as a model for export.
+//! Rendering and evaluating a trained model at any time t (no gradients): the nodes place
+//! the Gaussians exactly as in training (the field's `visible_only` rule included, so views
+//! match what was trained), PSNR and 3DGS-SSIM per frame, and the placed Gaussians as a
+//! model for export.
 
 use crate::deform::{self, Deformed};
 use crate::error::{Result, TrainError};
-use crate::field::{DeformField, DeformOutput};
 use crate::model::GaussianModel;
-use crate::objects::ObjectsView;
+use crate::node::{At, Rows};
+use crate::nodes::Nodes;
+use crate::timing::StepTimings;
 use serde::{Deserialize, Serialize};
 use splat::{Camera, Rasterizer, RenderOptions};
 
 #[derive(Default)]
 pub struct Renderer {
     raster: Rasterizer,
-    rows: Vec<u32>,
-    delta: DeformOutput,
     deformed: Deformed,
+}
+
+/// A trained scene as render, eval and export see it: the Gaussians, their object column,
+/// the nodes that place them, and the iteration reached (schedules such as the field's
+/// warm-up read it).
+pub struct Scene<'a> {
+    pub model: &'a GaussianModel,
+    pub column: &'a [u8],
+    pub nodes: &'a mut Nodes,
+    pub iteration: u32,
+}
+
+impl Scene<'_> {
+    /// Every Gaussian placed at time `t`, only those that can reach `cam` when given.
+    fn place(&mut self, cam: Option<&Camera>, t: f32, out: &mut Deformed) {
+        let rows = Rows {
+            model: self.model,
+            column: self.column,
+        };
+        let at = At {
+            time: t,
+            camera: cam,
+            iteration: self.iteration,
+        };
+        self.nodes
+            .place(rows, &at, out, &mut StepTimings::default());
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -123,60 +150,23 @@ impl EvalReport {
 }
 
 impl Renderer {
-    /// Fills the deformed geometry at time `t` (δ = 0 when `field` is None), objects placed
-    /// by their trajectories.
-    fn deform(
-        &mut self,
-        model: &GaussianModel,
-        field: Option<&mut DeformField>,
-        objects: ObjectsView,
-        cam: &Camera,
-        t: f32,
-    ) {
-        match field {
-            Some(f) => {
-                crate::visibility::field_rows(
-                    &model.means,
-                    cam,
-                    f.cfg.visible_only,
-                    f.cfg.visible_margin,
-                    &mut self.rows,
-                );
-                objects.keep_background_rows(&mut self.rows);
-                f.forward(&model.means, t, &self.rows, &mut self.delta);
-                deform::apply(model, Some(&self.delta), &mut self.deformed);
-            }
-            None => deform::apply(model, None, &mut self.deformed),
-        }
-        objects.place(model, t, &mut self.deformed);
-    }
-
-    /// The deformed geometry at time `t` exactly as [`Renderer::render`] draws it, for
+    /// The placed geometry at time `t` exactly as [`Renderer::render`] draws it, for
     /// callers that drive the rasterizer themselves (`examples/cull_probe.rs`).
-    pub fn deformed(
-        &mut self,
-        model: &GaussianModel,
-        field: Option<&mut DeformField>,
-        objects: ObjectsView,
-        cam: &Camera,
-        t: f32,
-    ) -> &Deformed {
-        self.deform(model, field, objects, cam, t);
+    pub fn deformed(&mut self, mut scene: Scene<'_>, cam: &Camera, t: f32) -> &Deformed {
+        scene.place(Some(cam), t, &mut self.deformed);
         &self.deformed
     }
 
     /// Renders `H·W·3` RGB at time `t` from `cam`.
     pub fn render(
         &mut self,
-        model: &GaussianModel,
-        field: Option<&mut DeformField>,
-        objects: ObjectsView,
+        mut scene: Scene<'_>,
         cam: &Camera,
         t: f32,
         background: [f32; 3],
     ) -> Result<Vec<f32>> {
-        self.deform(model, field, objects, cam, t);
-        let g = crate::trainer::gaussians(model, &self.deformed);
+        scene.place(Some(cam), t, &mut self.deformed);
+        let g = deform::gaussians(scene.model, &self.deformed);
         let opts = RenderOptions {
             background,
             ..RenderOptions::default()
@@ -187,18 +177,23 @@ impl Renderer {
     /// PSNR and SSIM (and `lpips`, when given) of every frame, rendered at its own time.
     pub fn evaluate(
         &mut self,
-        model: &GaussianModel,
-        mut field: Option<&mut DeformField>,
-        objects: ObjectsView,
+        scene: Scene<'_>,
         frames: &[scene::Frame],
         background: [f32; 3],
         mut lpips: Option<FrameScorer>,
     ) -> Result<EvalReport> {
         let mut out = Vec::with_capacity(frames.len());
         let mut ssim_ws = metrics::SsimWorkspace::new();
+        let (model, column, nodes, iteration) =
+            (scene.model, scene.column, scene.nodes, scene.iteration);
         for fr in frames {
-            let f = field.as_deref_mut();
-            let mut img = self.render(model, f, objects, &fr.camera, fr.time, background)?;
+            let scene = Scene {
+                model,
+                column,
+                nodes: &mut *nodes,
+                iteration,
+            };
+            let mut img = self.render(scene, &fr.camera, fr.time, background)?;
             // Scored as the image a viewer shows: clamped to [0, 1], as Deformable-3DGS's
             // `training_report` (`torch.clamp(render, 0, 1)`) and its saved 8-bit renders
             // do. Unclamped overshoot (likely on a white background) could only lower the
@@ -233,28 +228,14 @@ impl Renderer {
     }
 }
 
-/// The Gaussians deformed to time `t`, every one evaluated (no view), as a standard model:
-/// means + δx, quats normalize(q) + δr, log(exp(log_scale) + δs), and object Gaussians
-/// placed by their trajectories. Scales that δs drives to ≤ 0 are clamped to 1e-8 first
-/// (the rasterizer would square them; a log cannot).
-pub fn deformed_model(
-    model: &GaussianModel,
-    field: Option<&mut DeformField>,
-    objects: ObjectsView,
-    t: f32,
-) -> GaussianModel {
+/// The Gaussians placed at time `t`, every one (no view), as a standard model: field rows
+/// at means + δx, quats normalize(q) + δr, log(exp(log_scale) + δs); object rows by their
+/// trajectories. Scales that δs drives to ≤ 0 are clamped to 1e-8 first (the rasterizer
+/// would square them; a log cannot).
+pub fn deformed_model(mut scene: Scene<'_>, t: f32) -> GaussianModel {
     let mut d = Deformed::default();
-    let mut delta = DeformOutput::default();
-    match field {
-        Some(f) => {
-            let mut rows: Vec<u32> = (0..model.len() as u32).collect();
-            objects.keep_background_rows(&mut rows);
-            f.forward(&model.means, t, &rows, &mut delta);
-            deform::apply(model, Some(&delta), &mut d);
-        }
-        None => deform::apply(model, None, &mut d),
-    }
-    objects.place(model, t, &mut d);
+    scene.place(None, t, &mut d);
+    let model = scene.model;
     GaussianModel {
         means: d.means,
         quats: d.quats,

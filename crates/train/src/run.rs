@@ -21,7 +21,7 @@ impl RunInfo {
     pub fn save(&self, run: &Path) -> Result<()> {
         crate::io::create_dir_all(run)?;
         let text = serde_json::to_string_pretty(self).expect("plain data serializes");
-        crate::io::atomic_write(&run.join(RUN_FILE), text.as_bytes())
+        crate::io::write_atomic(&run.join(RUN_FILE), text.as_bytes())
     }
 
     pub fn load(run: &Path) -> Result<Self> {

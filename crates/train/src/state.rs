@@ -5,6 +5,10 @@
 use crate::adam::Adam;
 use crate::model::{GaussianModel, ROWS};
 
+/// The object column's value for a Gaussian of no object: it belongs to the deformation
+/// field's node (the object-ID maps' background value).
+pub const NO_OBJECT: u8 = 255;
+
 /// Per-Gaussian statistics of 3DGS `add_densification_stats`.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct DensifyStats {
@@ -64,9 +68,10 @@ pub struct GaussianState {
     pub stats: DensifyStats,
     /// Hook-owned rows, by name (usually none).
     pub aux: Vec<AuxRows>,
-    /// The object each Gaussian belongs to (`objects::NO_OBJECT`: the deformable
-    /// background). Maintained through every row change, never by raw row indices: a clone
-    /// or split child belongs to its parent's object.
+    /// The object each Gaussian belongs to, which says the node that owns its row
+    /// ([`NO_OBJECT`]: the deformation field's; an object's ID: the node of that object's
+    /// kind). Maintained through every row change, never by raw row indices: a clone or
+    /// split child belongs to its parent's object.
     pub object: Vec<u8>,
 }
 
@@ -116,7 +121,7 @@ impl GaussianState {
             adam,
             stats: DensifyStats::zeros(n),
             aux: Vec::new(),
-            object: vec![crate::objects::NO_OBJECT; n],
+            object: vec![NO_OBJECT; n],
         }
     }
 

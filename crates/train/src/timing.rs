@@ -1,6 +1,6 @@
-//! Wall time per phase of an iteration, accumulated for the performance breakdown (issue 5
-//! lists field forward/backward, projection, rasterization forward/backward, loss,
-//! optimizer, densification). Projection is timed inside the rasterizer's calls
+//! Wall time per phase of an iteration, accumulated for the performance breakdown (field
+//! forward/backward, projection, rasterization forward/backward, loss, hook, optimizer,
+//! densification, the rigid objects' mask term). Projection is timed inside the rasterizer's calls
 //! ([`splat::Timings::project`]) and moved out of the rasterization phases.
 
 use std::time::Instant;

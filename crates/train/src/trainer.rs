@@ -1,31 +1,35 @@
-//! The training loop of Deformable-3DGS (`train.py`): one random training view per
-//! iteration, field off during warm-up, loss → rasterizer backward → deformation chain →
-//! field backward, Adam on Gaussians and field, then 3DGS density control.
+//! The training loop of Deformable-3DGS (`train.py`) over the scene model's nodes: one
+//! random training view per iteration; the nodes place every Gaussian at the view's time,
+//! one rasterizer call renders them, the photometric loss's gradient goes back through the
+//! rasterizer and each node's placement; Adam on the Gaussians and on each node's own
+//! parameters; then 3DGS density control on the Gaussian store. The order of the calls is
+//! listed in `crate::node`.
 
-use crate::adam::{expon_lr, Adam, AdamHyper};
+use crate::adam::{expon_lr, AdamHyper};
 use crate::config::TrainConfig;
 use crate::deform::{self, CanonicalGrads, Deformed};
 use crate::densify::{self, DensifyReport};
 use crate::error::{Result, TrainError};
-use crate::field::{DeformField, DeformOutput};
 use crate::hook::{DeformHook, HookContext};
 use crate::loss::{LossValue, PhotoLoss};
 use crate::model::{GaussianModel, SH_COEFFS};
+use crate::node::{At, Milestone, Placed, Refining, Rendered, Rows};
+use crate::nodes::{NodeInit, Nodes};
 use crate::state::GaussianState;
 use crate::timing::{Phase, StepTimings};
 use rand::seq::SliceRandom;
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use scene::Dataset;
-use splat::{Colors, Gaussians, Gradients, Rasterizer, RenderOptions};
+use splat::{Gradients, Rasterizer, RenderOptions};
 
 /// What one iteration did.
 #[derive(Clone, Copy, Debug)]
 pub struct StepStats {
     pub iteration: u32,
     pub loss: LossValue,
-    /// Extra loss: the hook's, the rigid objects' mask term and the `mcmc` strategy's
-    /// opacity and scale penalties (0 without them).
+    /// Extra loss: the hook's, the nodes' own terms (the rigid objects' mask term) and the
+    /// `mcmc` strategy's opacity and scale penalties (0 without them).
     pub extra_loss: f32,
     pub psnr: f64,
     pub num_gaussians: usize,
@@ -37,9 +41,11 @@ pub struct StepStats {
 pub struct Trainer {
     pub cfg: TrainConfig,
     pub dataset: Dataset,
+    /// Every Gaussian, row-aligned with its optimizer state; the object column says which
+    /// node owns a row.
     pub state: GaussianState,
-    pub field: DeformField,
-    pub field_adam: Adam,
+    /// The scene model's nodes, in placement order (`crate::nodes`).
+    pub nodes: Nodes,
     /// Completed iterations.
     pub iteration: u32,
     pub(crate) rng: ChaCha8Rng,
@@ -51,8 +57,6 @@ pub struct Trainer {
     /// Wall-clock seconds spent training so far, over all resumed segments (the driver
     /// updates it; checkpoints keep it).
     pub train_seconds: f64,
-    /// The rigid objects (`[objects] enabled`): None for the baseline and the paper's runs.
-    pub objects: Option<crate::objects::RigidObjects>,
     ws: Workspace,
 }
 
@@ -61,9 +65,6 @@ pub struct Trainer {
 #[derive(Default)]
 struct Workspace {
     raster: Rasterizer,
-    rows: Vec<u32>,
-    delta: DeformOutput,
-    extra: DeformOutput,
     deformed: Deformed,
     grads: Gradients,
     canon: CanonicalGrads,
@@ -72,7 +73,6 @@ struct Workspace {
     radii: Vec<[i32; 2]>,
     /// Width and height of the last render.
     size: (u32, u32),
-    field_grad: Vec<f32>,
     loss: PhotoLoss,
 }
 
@@ -88,57 +88,29 @@ impl Trainer {
             )));
         }
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let model = match (&dataset.point_cloud, cfg.init.use_point_cloud) {
-            (Some(pc), true) if !pc.is_empty() => {
-                let pos: Vec<f32> = pc.iter().flatten().copied().collect();
-                // The file's colours as 3DGS does; grey, a neutral start, without them.
-                let rgb: Vec<f32> = match &dataset.point_colors {
-                    Some(c) if c.len() == pc.len() => c.iter().flatten().copied().collect(),
-                    _ => vec![0.5; pos.len()],
-                };
-                crate::init::from_points(&pos, &rgb, cfg.init.opacity)
-            }
-            _ => crate::init::random(&cfg.init, &mut rng),
-        };
-        let mut model = model;
-        if cfg.densify.strategy == crate::densify::Strategy::Mcmc {
-            crate::densify::mcmc::prepare_init(&mut model, &cfg.densify.mcmc);
-        }
-        if cfg.densify.strategy == crate::densify::Strategy::Mcmc
-            && model.len() > cfg.densify.mcmc.cap
-        {
-            // gsplat's MCMC never prunes below the initialization either: the cap then only
-            // stops growth, and relocation keeps the initial count.
-            tracing::warn!(
-                "the initialization holds {} Gaussians, more than [densify.mcmc] cap = {}: \
-                 the run keeps {} and never grows",
-                model.len(),
-                cfg.densify.mcmc.cap,
-                model.len()
-            );
-        }
-        let field = DeformField::new(&cfg.field, &mut rng);
+        let model = initial_gaussians(&cfg, &dataset, &mut rng);
+        let nodes = Nodes::build(NodeInit {
+            cfg: &cfg,
+            dataset: Some(&dataset),
+            rng: &mut rng,
+        })?;
         let extent = dataset.scene_extent();
-        let mut tr = Self::assemble(cfg, dataset, model, field, rng, extent);
-        tr.objects = crate::objects::RigidObjects::for_run(&tr.cfg, &tr.dataset)?;
-        Ok(tr)
+        Ok(Self::assemble(cfg, dataset, model, nodes, rng, extent))
     }
 
     pub(crate) fn assemble(
         cfg: TrainConfig,
         dataset: Dataset,
         model: GaussianModel,
-        field: DeformField,
+        nodes: Nodes,
         rng: ChaCha8Rng,
         extent: f32,
     ) -> Self {
-        let field_adam = Adam::zeros(field.mlp.num_params());
         Self {
             cfg,
             dataset,
             state: GaussianState::new(model),
-            field,
-            field_adam,
+            nodes,
             iteration: 0,
             rng,
             order: Vec::new(),
@@ -146,7 +118,6 @@ impl Trainer {
             extent,
             timings: StepTimings::default(),
             train_seconds: 0.0,
-            objects: None,
             ws: Workspace::default(),
         }
     }
@@ -172,37 +143,28 @@ impl Trainer {
     }
 
     /// Metrics on the first `max_frames` frames (0 = all) of the split `log.eval_split`,
-    /// with the field applied once training has passed the warm-up (before that it is
-    /// untrained).
+    /// placed as a checkpoint of this iteration would be (the field past its warm-up).
     pub fn evaluate_test(&mut self, max_frames: usize) -> Result<crate::render::EvalReport> {
-        let active = self.iteration >= self.cfg.field.warm_up;
         let frames = self.cfg.log.eval_split.frames(&self.dataset);
         let k = if max_frames == 0 {
             frames.len()
         } else {
             max_frames.min(frames.len())
         };
-        let objects = match &self.objects {
-            Some(o) => o.view(&self.state.object),
-            None => crate::objects::ObjectsView::none(),
+        let scene = crate::render::Scene {
+            model: &self.state.model,
+            column: &self.state.object,
+            nodes: &mut self.nodes,
+            iteration: self.iteration,
         };
         let mut r = crate::render::Renderer::default();
-        r.evaluate(
-            &self.state.model,
-            active.then_some(&mut self.field),
-            objects,
-            &frames[..k],
-            self.dataset.background,
-            None,
-        )
+        r.evaluate(scene, &frames[..k], self.dataset.background, None)
     }
 
-    /// The objects and the object column, for rendering (none for baseline runs).
-    pub fn objects_view(&self) -> crate::objects::ObjectsView<'_> {
-        match &self.objects {
-            Some(o) => o.view(&self.state.object),
-            None => crate::objects::ObjectsView::none(),
-        }
+    /// The first non-finite value of the Gaussians, their optimizer state or any node's
+    /// own parameters, named; `None` when everything is finite.
+    pub fn nonfinite(&self) -> Option<String> {
+        crate::finite::locate_store(&self.state).or_else(|| self.nodes.nonfinite())
     }
 
     /// Next training frame: a fresh random permutation each epoch (3DGS `viewpoint_stack`).
@@ -230,16 +192,24 @@ impl Trainer {
         {
             self.state.model.sh_degree += 1;
         }
-        self.start_objects(it)?;
+        self.begin_nodes(it)?;
         let fi = self.next_frame();
-        let active = self.field_active_at(it);
         let hook_k = hook.as_ref().map_or(0, |h| h.topk(it));
-        let topk = hook_k.max(self.objects.as_ref().map_or(0, |o| o.topk()));
-        self.forward_deform(fi, active, &mut tm);
-        let (loss, psnr, extra_loss) =
-            self.render_and_loss(fi, it, active, topk, &mut hook, &mut tm)?;
+        let topk = self.nodes.iter().map(|n| n.topk()).fold(hook_k, usize::max);
+        let at = At {
+            time: self.dataset.train[fi].time,
+            camera: Some(&self.dataset.train[fi].camera),
+            iteration: it,
+        };
+        let rows = Rows {
+            model: &self.state.model,
+            column: &self.state.object,
+        };
+        self.nodes.place(rows, &at, &mut self.ws.deformed, &mut tm);
+        let (loss, psnr, extra_loss) = self.render_and_loss(fi, it, topk, &mut hook, &mut tm)?;
         if !loss.total.is_finite() {
-            let culprit = crate::finite::locate(self)
+            let culprit = self
+                .nonfinite()
                 .map_or("every parameter is finite".into(), |c| {
                     format!("first non-finite: {c}")
                 });
@@ -248,14 +218,9 @@ impl Trainer {
                 what: format!("the loss ({culprit})"),
             });
         }
-        let objects_loss = self.backward(fi, active, &mut tm)?;
-        let (densify, finite, penalty) = self.optimize_and_densify(it, fi, active, &mut tm);
-        let culprit = if finite {
-            crate::finite::locate_objects(self)
-        } else {
-            crate::finite::locate(self)
-        };
-        if let Some(what) = culprit {
+        let nodes_loss = self.backward(fi, it, &mut tm)?;
+        let (densify, finite, penalty) = self.optimize_and_densify(it, fi, &mut tm);
+        if let Some(what) = (!finite).then(|| self.nonfinite()).flatten() {
             return Err(TrainError::NonFinite {
                 iteration: it,
                 what,
@@ -266,70 +231,28 @@ impl Trainer {
         Ok(StepStats {
             iteration: it,
             loss,
-            extra_loss: extra_loss + objects_loss + penalty,
+            extra_loss: extra_loss + nodes_loss + penalty,
             psnr,
             num_gaussians: self.state.len(),
-            field_active: active,
+            field_active: self.field_active_at(it),
             densify,
         })
     }
 
-    /// The rigid objects' milestones: brought in at their start iteration
-    /// (`objects::start`), their occlusion gauge applied again at `rescale_at`.
-    fn start_objects(&mut self, it: u32) -> Result<()> {
-        let Some(node) = self.objects.as_mut() else {
-            return Ok(());
-        };
-        let t0 = std::time::Instant::now();
-        if !node.started && it >= node.cfg.start_iter {
-            crate::objects::start::start(node, &mut self.state, &self.dataset, &mut self.rng)?;
-            let seconds = t0.elapsed().as_secs_f64();
-            tracing::info!(iteration = it, seconds, "rigid objects started");
-        } else if node.started && node.cfg.rescale_at.contains(&it) {
-            let field = (it >= self.cfg.field.warm_up).then_some(&mut self.field);
-            let applied =
-                crate::objects::regauge::regauge(node, &mut self.state, field, &self.dataset)?;
-            let seconds = t0.elapsed().as_secs_f64();
-            tracing::info!(
-                iteration = it,
-                seconds,
-                ?applied,
-                "occlusion gauge applied again"
-            );
+    /// Each node's work at the start of iteration `it` (milestones), in order; a node may
+    /// place the nodes before it.
+    fn begin_nodes(&mut self, it: u32) -> Result<()> {
+        for i in 0..self.nodes.len() {
+            let (earlier, rest) = self.nodes.split_at_mut(i);
+            rest[0].begin_step(Milestone {
+                iteration: it,
+                state: &mut self.state,
+                dataset: &self.dataset,
+                rng: &mut self.rng,
+                earlier,
+            })?;
         }
         Ok(())
-    }
-
-    fn forward_deform(&mut self, fi: usize, active: bool, tm: &mut StepTimings) {
-        let ws = &mut self.ws;
-        let model = &self.state.model;
-        let objects = match &self.objects {
-            Some(o) => o.view(&self.state.object),
-            None => crate::objects::ObjectsView::none(),
-        };
-        if active {
-            let t0 = std::time::Instant::now();
-            let frame = &self.dataset.train[fi];
-            let fc = &self.cfg.field;
-            crate::visibility::field_rows(
-                &model.means,
-                &frame.camera,
-                fc.visible_only,
-                fc.visible_margin,
-                &mut ws.rows,
-            );
-            objects.keep_background_rows(&mut ws.rows);
-            self.field
-                .forward(&model.means, frame.time, &ws.rows, &mut ws.delta);
-            tm.record(Phase::FieldForward, t0);
-        }
-        let t0 = std::time::Instant::now();
-        deform::apply(model, active.then_some(&ws.delta), &mut ws.deformed);
-        if let Some(node) = self.objects.as_mut() {
-            let t = self.dataset.train[fi].time;
-            node.place(model, &self.state.object, t, &mut ws.deformed);
-        }
-        tm.record(Phase::Deform, t0);
     }
 
     fn render_options(&self, topk: usize) -> RenderOptions {
@@ -340,11 +263,12 @@ impl Trainer {
         }
     }
 
+    /// The one rasterizer call, the photometric loss, then each node's look at the render
+    /// and the hook on the deformation; returns the loss, the PSNR and the hook's loss.
     fn render_and_loss(
         &mut self,
         fi: usize,
         it: u32,
-        active: bool,
         topk: usize,
         hook: &mut Option<&mut dyn DeformHook>,
         tm: &mut StepTimings,
@@ -353,7 +277,7 @@ impl Trainer {
         let ws = &mut self.ws;
         let model = &self.state.model;
         let frame = &self.dataset.train[fi];
-        let g = gaussians(model, &ws.deformed);
+        let g = deform::gaussians(model, &ws.deformed);
         let t0 = std::time::Instant::now();
         let out = ws.raster.forward(&g, &frame.camera, &opts)?;
         tm.record(Phase::RasterForward, t0);
@@ -373,39 +297,43 @@ impl Trainer {
             self.cfg.loss.lambda_dssim,
             &mut ws.dl_dimage,
         );
-        if let Some(node) = &self.objects {
-            node.mask_background(it, fi, &mut ws.dl_dimage);
+        let mut aux = crate::state::AuxStore::new(&mut self.state.aux, model.len());
+        for node in self.nodes.iter_mut() {
+            let r = Rendered {
+                iteration: it,
+                frame: fi,
+                topk,
+                topk_ids: out.topk_ids,
+                topk_weights: out.topk_weights,
+                dl_dimage: &mut ws.dl_dimage,
+            };
+            node.after_render(r, &mut aux)?;
         }
         let psnr = metrics::psnr(out.image, &ws.gt);
         ws.radii.clear();
         ws.radii.extend_from_slice(out.radii);
         ws.size = (out.width, out.height);
         tm.record(Phase::Loss, t0);
-        ws.extra.reset(model.len());
-        let mut aux = crate::state::AuxStore::new(&mut self.state.aux, model.len());
-        if let Some(node) = &self.objects {
-            node.record_votes(fi, out.topk_ids, out.topk_weights, topk, &mut aux)
-                .map_err(TrainError::Hook)?;
-        }
         let mut extra_loss = 0.0;
-        if let Some(h) = hook.as_mut() {
+        let deformation = self.nodes.iter_mut().find_map(|n| n.deformation());
+        if let (Some(h), Some(d)) = (hook.as_mut(), deformation) {
             let t0 = std::time::Instant::now();
             let ctx = HookContext {
                 iteration: it,
                 frame_index: fi,
                 frame,
-                field_active: active,
+                field_active: d.active,
                 width: out.width,
                 height: out.height,
                 topk,
                 topk_ids: out.topk_ids,
                 topk_weights: out.topk_weights,
-                delta: &ws.delta,
+                delta: d.delta,
                 means: &model.means,
-                field_rows: &ws.rows,
+                field_rows: d.rows,
             };
             extra_loss = h
-                .apply(&ctx, &mut aux, &mut ws.extra)
+                .apply(&ctx, &mut aux, d.grad)
                 .map_err(|e| TrainError::Hook(e.to_string()))?;
             tm.record(Phase::Hook, t0);
         }
@@ -414,64 +342,55 @@ impl Trainer {
         Ok((loss, psnr, extra_loss))
     }
 
-    /// Rasterizer backward, the objects' mask term and chain, the field backward; returns
-    /// the objects' mask loss.
-    fn backward(&mut self, fi: usize, active: bool, tm: &mut StepTimings) -> Result<f32> {
+    /// Rasterizer backward, the nodes' own loss terms, the chain through the rest
+    /// placement, then each node's chain through its own placement; returns the nodes'
+    /// loss.
+    fn backward(&mut self, fi: usize, it: u32, tm: &mut StepTimings) -> Result<f32> {
         let opts = self.render_options(0);
         let ws = &mut self.ws;
         let model = &self.state.model;
         let frame = &self.dataset.train[fi];
-        let g = gaussians(model, &ws.deformed);
+        let g = deform::gaussians(model, &ws.deformed);
         let t0 = std::time::Instant::now();
         ws.raster
             .backward(&g, &frame.camera, &opts, &ws.dl_dimage, None, &mut ws.grads)?;
         tm.record(Phase::RasterBackward, t0);
         let projection = ws.raster.timings().project;
         tm.move_seconds(Phase::RasterBackward, Phase::ProjectionBackward, projection);
-        let mut objects_loss = 0.0;
-        if let Some(node) = self.objects.as_mut().filter(|n| n.started) {
-            let t0 = std::time::Instant::now();
-            let cam = &frame.camera;
-            objects_loss = node.add_mask_loss(fi, cam, model, &ws.deformed, &mut ws.grads)?;
-            tm.record(Phase::Objects, t0);
+        let placed = Placed {
+            iteration: it,
+            frame: fi,
+            camera: &frame.camera,
+            time: frame.time,
+            model,
+            deformed: &ws.deformed,
+        };
+        let mut nodes_loss = 0.0;
+        for node in self.nodes.iter_mut() {
+            nodes_loss += node.add_loss(&placed, &mut ws.grads, tm)?;
         }
         let t0 = std::time::Instant::now();
-        deform::backward(
-            model,
-            &ws.grads.means,
-            &ws.grads.quats,
-            &ws.grads.scales,
-            &mut ws.canon,
-        );
-        if let Some(node) = self.objects.as_mut() {
-            node.backward(model, &ws.grads.means, &ws.grads.quats, &mut ws.canon);
-        }
+        let (gr, canon) = (&ws.grads, &mut ws.canon);
+        deform::backward(model, &gr.means, &gr.quats, &gr.scales, canon);
         tm.record(Phase::Deform, t0);
-        if active {
-            let t0 = std::time::Instant::now();
-            // δ enters additively: dL/dδ = dL/d(deformed) + the hook's extra term.
-            for (e, g) in [
-                (&mut ws.extra.dx, &ws.grads.means),
-                (&mut ws.extra.dr, &ws.grads.quats),
-                (&mut ws.extra.ds, &ws.grads.scales),
-            ] {
-                e.iter_mut().zip(g).for_each(|(a, b)| *a += b);
-            }
-            self.field.backward(&ws.extra, &mut ws.field_grad);
-            tm.record(Phase::FieldBackward, t0);
+        let rows = Rows {
+            model,
+            column: &self.state.object,
+        };
+        for node in self.nodes.iter_mut() {
+            node.backward(rows, &ws.grads, &mut ws.canon, tm);
         }
-        Ok(objects_loss)
+        Ok(nodes_loss)
     }
 
-    /// Adam on the field and Gaussians, then density control (3DGS `train.py` order; what
-    /// the strategy does when: `densify::Schedule`). The field always steps. Returns the
+    /// Adam on the Gaussians and on each node's parameters, then density control (3DGS
+    /// `train.py` order; what the strategy does when: `densify::Schedule`). Returns the
     /// refinement's report, whether every value the optimizer wrote is finite, and the
     /// `mcmc` penalties' loss.
     fn optimize_and_densify(
         &mut self,
         it: u32,
         frame: usize,
-        active: bool,
         tm: &mut StepTimings,
     ) -> (Option<DensifyReport>, bool, f32) {
         let t0 = std::time::Instant::now();
@@ -481,13 +400,6 @@ impl Trainer {
             beta2: c.lr.adam_beta2,
             eps: c.lr.adam_eps,
         };
-        let mut finite = true;
-        if active {
-            let lr = expon_lr(c.lr.field_init, c.lr.field_final, c.lr.field_max_steps, it);
-            finite &= self
-                .field_adam
-                .step(&mut self.field.mlp.params, &self.ws.field_grad, hp, lr);
-        }
         let d = c.densify.clone();
         let white = self.dataset.background == [1.0; 3];
         let plan = densify::Schedule::at(&d, it, white);
@@ -502,11 +414,12 @@ impl Trainer {
                 &mut g.canon.log_scales,
             );
         }
+        let mut finite = true;
         if plan.step_gaussians {
             finite &= self.adam_gaussians(lr_means, hp, plan.step_opacity);
         }
-        if let Some(node) = self.objects.as_mut() {
-            node.step(hp);
+        for node in self.nodes.iter_mut() {
+            finite &= node.step(it, hp);
         }
         tm.record(Phase::Optimizer, t0);
         let t0 = std::time::Instant::now();
@@ -518,15 +431,7 @@ impl Trainer {
                 .add(&self.ws.radii, &self.ws.grads.means2d, w, h);
         }
         if plan.refine {
-            if let Some(node) = &self.objects {
-                let at = crate::objects::membership::StepPlacement {
-                    deformed: &self.ws.deformed,
-                    background_rows: active.then_some(self.ws.rows.as_slice()),
-                    time: self.dataset.train[frame].time,
-                };
-                let moved = node.transfer(&mut self.state, &at);
-                tracing::debug!(iteration = it, moved, "object membership transfers");
-            }
+            self.before_refine(it, frame);
             let prune_screen = it > d.screen_size_after;
             report = Some(densify::refine(
                 &mut self.state,
@@ -545,6 +450,23 @@ impl Trainer {
         }
         tm.record(Phase::Densify, t0);
         (report, finite, penalty)
+    }
+
+    /// Each node's rule before a refinement, seeing where this step placed every row.
+    fn before_refine(&mut self, it: u32, frame: usize) {
+        let mut placed = vec![true; self.state.len()];
+        for node in self.nodes.iter() {
+            node.mark_unplaced(&self.state.object, &mut placed);
+        }
+        let step = Refining {
+            iteration: it,
+            time: self.dataset.train[frame].time,
+            deformed: &self.ws.deformed,
+            placed: &placed,
+        };
+        for node in self.nodes.iter() {
+            node.before_refine(&mut self.state, &step);
+        }
     }
 
     /// The means' learning rate at iteration `it` (3DGS's exponential decay, × the spatial
@@ -587,17 +509,36 @@ impl Trainer {
     }
 }
 
-/// The rasterizer's view of canonical colours/opacities with deformed geometry.
-pub fn gaussians<'a>(model: &'a GaussianModel, d: &'a Deformed) -> Gaussians<'a> {
-    Gaussians {
-        means: &d.means,
-        quats: &d.quats,
-        scales: &d.scales,
-        opacity_logits: &model.opacity_logits,
-        colors: Colors::Sh {
-            coeffs: &model.sh,
-            num_coeffs: SH_COEFFS,
-            degree: model.sh_degree,
-        },
+/// The first Gaussians: the scene's point cloud (if any and enabled) or random points
+/// from `rng`, prepared for the density-control strategy.
+fn initial_gaussians(cfg: &TrainConfig, dataset: &Dataset, rng: &mut ChaCha8Rng) -> GaussianModel {
+    let model = match (&dataset.point_cloud, cfg.init.use_point_cloud) {
+        (Some(pc), true) if !pc.is_empty() => {
+            let pos: Vec<f32> = pc.iter().flatten().copied().collect();
+            // The file's colours as 3DGS does; grey, a neutral start, without them.
+            let rgb: Vec<f32> = match &dataset.point_colors {
+                Some(c) if c.len() == pc.len() => c.iter().flatten().copied().collect(),
+                _ => vec![0.5; pos.len()],
+            };
+            crate::init::from_points(&pos, &rgb, cfg.init.opacity)
+        }
+        _ => crate::init::random(&cfg.init, rng),
+    };
+    let mut model = model;
+    if cfg.densify.strategy == crate::densify::Strategy::Mcmc {
+        crate::densify::mcmc::prepare_init(&mut model, &cfg.densify.mcmc);
     }
+    if cfg.densify.strategy == crate::densify::Strategy::Mcmc && model.len() > cfg.densify.mcmc.cap
+    {
+        // gsplat's MCMC never prunes below the initialization either: the cap then only
+        // stops growth, and relocation keeps the initial count.
+        tracing::warn!(
+            "the initialization holds {} Gaussians, more than [densify.mcmc] cap = {}: \
+             the run keeps {} and never grows",
+            model.len(),
+            cfg.densify.mcmc.cap,
+            model.len()
+        );
+    }
+    model
 }

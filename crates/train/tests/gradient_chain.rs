@@ -90,7 +90,7 @@ fn loss(s: &mut Scene, r: &mut Rasterizer) -> f64 {
     deform::apply(&s.model, Some(&delta), &mut d);
     let out = r
         .forward(
-            &train::trainer::gaussians(&s.model, &d),
+            &train::deform::gaussians(&s.model, &d),
             &s.cam,
             &RenderOptions::default(),
         )
@@ -112,7 +112,7 @@ fn chain_matches_finite_differences() {
     s.field.forward(&s.model.means, s.t, &rows, &mut delta);
     let mut d = Deformed::default();
     deform::apply(&s.model, Some(&delta), &mut d);
-    let g = train::trainer::gaussians(&s.model, &d);
+    let g = train::deform::gaussians(&s.model, &d);
     r.forward(&g, &s.cam, &RenderOptions::default()).unwrap();
     let mut grads = Gradients::default();
     r.backward(

@@ -109,7 +109,7 @@ fn report_knots(o: &RigidObject, x: &[[f32; 3]], gt: &ObjectsFile, index: usize)
 /// The background's rendered depth against the true ground (z = 0) behind each object's
 /// mask, in a few training views.
 fn depth_check(tr: &Trainer) {
-    let node = tr.objects.as_ref().unwrap();
+    let node = tr.nodes.get::<train::objects::RigidObjects>().unwrap();
     let m = &tr.state.model;
     let mut d = train::deform::Deformed::default();
     train::deform::apply(m, None, &mut d);
@@ -222,7 +222,7 @@ fn recovered_trajectories_follow_the_true_motion() {
         start,
         t0.elapsed().as_secs_f64()
     );
-    let node = tr.objects.as_ref().unwrap();
+    let node = tr.nodes.get::<train::objects::RigidObjects>().unwrap();
     {
         // Camera check: the true box of each object projected with the data set's camera,
         // against its mask's bounding box.
@@ -258,13 +258,12 @@ fn recovered_trajectories_follow_the_true_motion() {
         let nt = tr.dataset.train.len();
         for f in [0usize, nt / 3, 2 * nt / 3, nt - 1] {
             let frame = &tr.dataset.train[f];
-            let view = train::objects::ObjectsView {
-                objects: std::slice::from_ref(o),
-                column: &vec![o.id; m.len()],
-            };
+            let one = std::slice::from_ref(o);
+            let mut rows = Vec::new();
+            train::objects::place::rows_by_object(one, &vec![o.id; m.len()], &mut rows);
             let mut d = train::deform::Deformed::default();
             train::deform::apply(&m, None, &mut d);
-            view.place(&m, frame.time, &mut d);
+            train::objects::place::place(one, &rows, &m, frame.time, &mut d, &mut Vec::new());
             let depth = train::objects::lift::render_depth(
                 &mut raster,
                 &d.means,

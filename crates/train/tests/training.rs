@@ -3,24 +3,25 @@
 
 mod common;
 
+use train::field_node::FieldNode;
+use train::objects::RigidObjects;
 use train::{checkpoint, Trainer};
 
 fn train_psnr(tr: &mut Trainer) -> f64 {
     let frames = tr.dataset.train.clone();
     let mut r = train::render::Renderer::default();
-    let active = tr.iteration >= tr.cfg.field.warm_up;
     let bg = tr.dataset.background;
-    r.evaluate(
-        &tr.state.model,
-        active.then_some(&mut tr.field),
-        train::objects::ObjectsView::none(),
-        &frames,
-        bg,
-        None,
-    )
-    .unwrap()
-    .mean
-    .psnr
+    let scene = train::render::Scene {
+        model: &tr.state.model,
+        column: &tr.state.object,
+        nodes: &mut tr.nodes,
+        iteration: tr.iteration,
+    };
+    r.evaluate(scene, &frames, bg, None).unwrap().mean.psnr
+}
+
+fn field(t: &Trainer) -> &FieldNode {
+    t.nodes.get::<FieldNode>().expect("every run has a field")
 }
 
 /// 300 iterations of the rescaled 40k schedule (field from 23, densification 4..113)
@@ -147,8 +148,8 @@ fn assert_bit_equal(a: &Trainer, c: &Trainer) {
             v.push((format!("adam{g}.v"), ad.v.clone()));
         }
         v.push(("stats.grad_accum".into(), t.state.stats.grad_accum.clone()));
-        v.push(("field".into(), t.field.mlp.params.clone()));
-        v.push(("field.adam.m".into(), t.field_adam.m.clone()));
+        v.push(("field".into(), field(t).field.mlp.params.clone()));
+        v.push(("field.adam.m".into(), field(t).adam.m.clone()));
         for r in &t.state.aux {
             v.push((format!("aux.{}", r.name), r.data.clone()));
         }
@@ -164,7 +165,7 @@ fn assert_bit_equal(a: &Trainer, c: &Trainer) {
         assert!(first.is_none(), "{name} differs first at {first:?}");
     }
     assert_eq!(a.state.model.sh_degree, c.state.model.sh_degree);
-    assert_eq!(a.field_adam.step, c.field_adam.step);
+    assert_eq!(field(a).adam.step, field(c).adam.step);
 }
 
 /// The tiny scene with its ground-truth instance masks as object-ID maps (what
@@ -280,7 +281,10 @@ fn fork_at_the_regularizer_start_equals_training_from_scratch() {
     while base.iteration < 80 {
         base.step().unwrap();
     }
-    assert_ne!(base.field.mlp.params, scratch.field.mlp.params);
+    assert_ne!(
+        field(&base).field.mlp.params,
+        field(&scratch).field.mlp.params
+    );
 }
 
 /// A point cloud with colours (3DGS `fetchPly`) starts each Gaussian at its point's colour:
@@ -342,7 +346,7 @@ fn rigid_objects_survive_densify_and_resume() {
     for _ in 0..80 {
         a.step().unwrap();
     }
-    let node = a.objects.as_ref().expect("objects started");
+    let node = a.nodes.get::<RigidObjects>().expect("objects started");
     assert_eq!(node.objects.len(), 3, "one rigid body per vehicle");
     let owned = |t: &Trainer| t.state.object.iter().filter(|&&o| o != 255).count();
     assert!(owned(&a) > 0, "object Gaussians survive densification");
@@ -362,7 +366,7 @@ fn rigid_objects_survive_densify_and_resume() {
     assert_bit_equal(&a, &c);
     assert_eq!(a.state.object, c.state.object, "object column");
     let poses = |t: &Trainer| -> Vec<u32> {
-        let node = t.objects.as_ref().unwrap();
+        let node = t.nodes.get::<RigidObjects>().unwrap();
         node.objects
             .iter()
             .flat_map(|o| {

@@ -86,13 +86,7 @@ pub fn run(a: Args) -> Result<()> {
         std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     }
     for t in &times {
-        let active = r.iteration >= r.cfg.field.warm_up;
-        let objects = train::objects::ObjectsView {
-            objects: &r.objects,
-            column: &r.column,
-        };
-        let m =
-            train::render::deformed_model(&r.model, active.then_some(&mut r.field), objects, *t);
+        let m = train::render::deformed_model(r.scene(), *t);
         let path = if single {
             a.out.clone()
         } else {

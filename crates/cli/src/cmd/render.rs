@@ -9,7 +9,7 @@
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 use train::render::{EvalReport, Renderer};
-use train::{checkpoint, DeformField, GaussianModel, TrainConfig};
+use train::{checkpoint, GaussianModel, TrainConfig};
 
 /// PNGs of a split's cameras from a run's latest (or chosen) checkpoint.
 ///
@@ -49,11 +49,13 @@ pub fn output_dir(run: &Path, what: &str, iteration: Option<u32>) -> PathBuf {
 pub struct LoadedRun {
     pub cfg: TrainConfig,
     pub model: GaussianModel,
-    pub field: DeformField,
     pub iteration: u32,
-    /// Rigid objects (empty for runs without them) and the per-Gaussian object column.
+    /// Rigid objects (empty for runs without them), for selecting and naming, and the
+    /// per-Gaussian object column.
     pub objects: Vec<train::objects::RigidObject>,
     pub column: Vec<u8>,
+    /// The scene model's nodes, which place the Gaussians at any time.
+    pub nodes: train::nodes::Nodes,
     pub dataset: scene::Dataset,
     pub renderer: Renderer,
 }
@@ -68,15 +70,25 @@ impl LoadedRun {
             .dataset()
             .with_context(|| format!("loading {}", info.scene.display()))?;
         Ok(Self {
+            objects: m.objects().to_vec(),
             cfg: m.cfg,
             model: m.model,
-            field: m.field,
             iteration: m.iteration,
-            objects: m.objects,
             column: m.column,
+            nodes: m.nodes,
             dataset,
             renderer: Renderer::default(),
         })
+    }
+
+    /// The scene for `train::render`.
+    pub fn scene(&mut self) -> train::render::Scene<'_> {
+        train::render::Scene {
+            model: &self.model,
+            column: &self.column,
+            nodes: &mut self.nodes,
+            iteration: self.iteration,
+        }
     }
 
     /// Keeps only the Gaussians `sel` keeps (the model shrinks to them, with their column).
@@ -120,19 +132,13 @@ impl LoadedRun {
         lpips: Option<train::render::FrameScorer>,
     ) -> Result<EvalReport> {
         let bg = self.dataset.background;
-        let active = self.iteration >= self.cfg.field.warm_up;
-        let objects = train::objects::ObjectsView {
-            objects: &self.objects,
+        let scene = train::render::Scene {
+            model: &self.model,
             column: &self.column,
+            nodes: &mut self.nodes,
+            iteration: self.iteration,
         };
-        Ok(self.renderer.evaluate(
-            &self.model,
-            active.then_some(&mut self.field),
-            objects,
-            frames,
-            bg,
-            lpips,
-        )?)
+        Ok(self.renderer.evaluate(scene, frames, bg, lpips)?)
     }
 }
 
@@ -163,15 +169,13 @@ pub fn run(a: Args) -> Result<()> {
     let bg = r.dataset.background;
     for (i, fr) in frames.iter().enumerate() {
         let t = a.time.unwrap_or(fr.time);
-        let active = r.iteration >= r.cfg.field.warm_up;
-        let objects = train::objects::ObjectsView {
-            objects: &r.objects,
+        let scene = train::render::Scene {
+            model: &r.model,
             column: &r.column,
+            nodes: &mut r.nodes,
+            iteration: r.iteration,
         };
-        let field = active.then_some(&mut r.field);
-        let img = r
-            .renderer
-            .render(&r.model, field, objects, &fr.camera, t, bg)?;
+        let img = r.renderer.render(scene, &fr.camera, t, bg)?;
         let png = scene::ImageU8::from_f32(fr.camera.width, fr.camera.height, &img);
         let name = match a.time {
             Some(t) => format!("{}_t{t:.3}.png", frame_stem(&fr.file_path, i)),

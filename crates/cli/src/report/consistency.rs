@@ -22,7 +22,7 @@ use train::regularizer::{
     RigidityAccumulator, RigidityReport, TopKView,
 };
 use train::render::deformed_model;
-use train::{checkpoint, run::RunInfo, DeformField};
+use train::{checkpoint, run::RunInfo};
 
 /// Top-k ids of a render of `m` (already deformed) from `frame`'s camera.
 fn render_topk(
@@ -52,10 +52,10 @@ fn render_topk(
     Ok(raster.forward(&g, &frame.camera, &opts)?.topk_ids.to_vec())
 }
 
-/// Deformed Gaussians at `t` (canonical ones while the field is still in warm-up), rigid
-/// objects placed by their trajectories.
-fn at_time(m: &LoadedModel, field: &mut Option<DeformField>, t: f32) -> GaussianModel {
-    deformed_model(&m.model, field.as_mut(), m.objects_view(), t)
+/// The Gaussians placed at `t` by the checkpoint's nodes (canonical field rows while the
+/// field is still in warm-up, rigid objects by their trajectories).
+fn at_time(m: &mut LoadedModel, t: f32) -> GaussianModel {
+    deformed_model(m.scene(), t)
 }
 
 /// Both vehicle metrics of one run.
@@ -164,9 +164,8 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
     let objects_path = info.scene.join("objects.json");
     let objects = ObjectsFile::load(&objects_path)?;
     let dir = checkpoint::select(run, iteration)?;
-    let loaded =
+    let mut loaded =
         checkpoint::load_model(&dir).with_context(|| format!("loading {}", dir.display()))?;
-    let mut field = loaded.field_active().then(|| loaded.field.clone());
     let mut test: Vec<&Frame> = ds.test.iter().collect();
     test.sort_by(|a, b| a.time.total_cmp(&b.time));
     let Some(reference) = test.first().copied() else {
@@ -174,7 +173,7 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
     };
     let mask = scene::load_mask(&ds.gt_mask_path(reference))?;
     let k = RegConfig::default().k;
-    let anchor = at_time(&loaded, &mut field, reference.time);
+    let anchor = at_time(&mut loaded, reference.time);
     let ids = render_topk(&anchor, reference, ds.background, k)?;
     let mut groups = ObjectGroups::new();
     groups.build(
@@ -199,10 +198,10 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
     let mut acc = ConsistencyAccumulator::new();
     let mut rigidity = RigidityAccumulator::new();
     let mut split =
-        (!loaded.objects.is_empty()).then(|| SplitAccumulator::new(&groups, &loaded.column));
+        (!loaded.objects().is_empty()).then(|| SplitAccumulator::new(&groups, &loaded.column));
     for f in &test {
         let pose_t = pose(f)?;
-        let deformed = at_time(&loaded, &mut field, f.time);
+        let deformed = at_time(&mut loaded, f.time);
         let (mut tracks, mut groups_of) = (Vec::new(), Vec::new());
         for (k, g) in groups.iter().enumerate() {
             let Some(i) = objects.objects.iter().position(|o| o.id == g.object) else {

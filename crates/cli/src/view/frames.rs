@@ -11,7 +11,7 @@ use crate::cmd::render::LoadedRun;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
-use train::objects::{ObjectsView, RigidObject, NO_OBJECT};
+use train::objects::{RigidObject, NO_OBJECT};
 use train::GaussianModel;
 
 pub const ROW_BYTES: usize = 32;
@@ -262,12 +262,7 @@ impl FrameSource {
 
 /// The run's Gaussians deformed to `t`, as `semdynreg export --time t` computes them.
 fn deformed_splats(r: &mut LoadedRun, t: f32) -> Vec<u8> {
-    let active = r.iteration >= r.cfg.field.warm_up;
-    let objects = ObjectsView {
-        objects: &r.objects,
-        column: &r.column,
-    };
-    let m = train::render::deformed_model(&r.model, active.then_some(&mut r.field), objects, t);
+    let m = train::render::deformed_model(r.scene(), t);
     splat_bytes(&m)
 }
 

@@ -2,8 +2,8 @@
 //! `densify_and_split`, `reset_opacity`), applied to [`GaussianState`] so that parameters,
 //! Adam moments and statistics move together. Deformable-3DGS trains with exactly this.
 
+use super::DensifyConfig;
 use super::{max_scale, rotation, DensifyReport};
-use crate::config::DensifyConfig;
 use crate::model::{inverse_sigmoid, sigmoid};
 use crate::state::{DensifyStats, GaussianState};
 use rand::Rng;

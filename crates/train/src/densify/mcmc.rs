@@ -69,12 +69,12 @@ impl Default for McmcConfig {
 impl McmcConfig {
     /// Rejects values that would break a run; `(key, problem)`.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
-        if self.cap == 0 || self.cap > crate::config::MAX_RANDOM_POINTS {
+        if self.cap == 0 || self.cap > crate::init::MAX_RANDOM_POINTS {
             return Err((
                 "cap",
                 format!(
                     "must be in 1..={}, got {}",
-                    crate::config::MAX_RANDOM_POINTS,
+                    crate::init::MAX_RANDOM_POINTS,
                     self.cap
                 ),
             ));

@@ -13,13 +13,14 @@
 //! refinement iterations; strategy-specific work stays in the strategy's module.
 
 pub mod adaptive;
+pub mod config;
 pub mod mcmc;
 pub mod relocation;
 
 pub use adaptive::{densify_and_prune, reset_opacity};
+pub use config::{DensifyConfig, MAX_SPLIT_CHILDREN};
 pub use mcmc::McmcConfig;
 
-use crate::config::DensifyConfig;
 use crate::state::GaussianState;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -168,11 +169,10 @@ mod tests {
 
     #[test]
     fn strategy_reads_from_toml() {
-        let c: crate::TrainConfig =
-            toml::from_str("[densify]\nstrategy = \"mcmc\"\n[densify.mcmc]\ncap = 1234\n").unwrap();
-        assert_eq!(c.densify.strategy, Strategy::Mcmc);
-        assert_eq!(c.densify.mcmc.cap, 1234);
-        let e = toml::from_str::<crate::TrainConfig>("[densify]\nstrategy = \"fast\"\n")
+        let c: DensifyConfig = toml::from_str("strategy = \"mcmc\"\n[mcmc]\ncap = 1234\n").unwrap();
+        assert_eq!(c.strategy, Strategy::Mcmc);
+        assert_eq!(c.mcmc.cap, 1234);
+        let e = toml::from_str::<DensifyConfig>("strategy = \"fast\"\n")
             .unwrap_err()
             .to_string();
         assert!(e.contains("adaptive") && e.contains("mcmc"), "{e}");

@@ -12,7 +12,7 @@
 //! released from an object to the background: the mask term pushes object Gaussians that
 //! spill outside the silhouette back in, or makes them transparent.
 
-use super::{RigidObject, NO_OBJECT};
+use super::RigidObject;
 use crate::deform::Deformed;
 use crate::quat;
 use crate::regularizer::{MembershipVotes, TopKView};
@@ -32,9 +32,9 @@ pub struct Membership {
 /// Where a step's Gaussians are in the world, for converting the ones that move.
 pub struct StepPlacement<'a> {
     pub deformed: &'a Deformed,
-    /// Background Gaussians whose placement is valid this step (evaluated by the field, or
-    /// all of them while the field is off); object Gaussians are always placed.
-    pub background_rows: Option<&'a [u32]>,
+    /// Whether each row's placement is valid this step: false for rows their node left at
+    /// rest (the field's rows culled from the view, `Node::mark_unplaced`).
+    pub placed: &'a [bool],
     pub time: f32,
 }
 
@@ -98,14 +98,10 @@ impl Membership {
             return 0;
         };
         let cols = state.aux[vi].cols;
-        let mut valid = vec![at.background_rows.is_none(); state.len()];
-        if let Some(rows) = at.background_rows {
-            rows.iter().for_each(|&r| valid[r as usize] = true);
-        }
         let mut moved = Vec::new();
-        for (i, &ok) in valid.iter().enumerate() {
+        for (i, &ok) in at.placed.iter().enumerate() {
             let from = state.object[i];
-            if from == NO_OBJECT && !ok {
+            if !ok {
                 continue;
             }
             let row = &state.aux[vi].data[i * cols..(i + 1) * cols];

@@ -19,6 +19,9 @@
 //!   the trajectories;
 //! - densification keeps the column aligned (children inherit their parent's object).
 //!
+//! [`node`] is the scene model's view of all this: the rigid objects as one node kind
+//! (`crate::node::Node`).
+//!
 //! After training, [`select`] turns named objects (and `background`) into the rows render
 //! and export keep, and [`export`] writes one object in its own frame with its trajectory.
 
@@ -30,6 +33,7 @@ pub mod knots;
 pub mod lift;
 pub mod mask_loss;
 pub mod membership;
+pub mod node;
 pub mod place;
 pub mod regauge;
 pub mod select;
@@ -67,45 +71,6 @@ impl RigidObject {
             is_static,
             trajectory,
         }
-    }
-}
-
-/// The objects of a trained model and the per-Gaussian object column (`NO_OBJECT` for the
-/// deformable background), as render, eval and export need them.
-#[derive(Clone, Copy, Debug)]
-pub struct ObjectsView<'a> {
-    pub objects: &'a [RigidObject],
-    pub column: &'a [u8],
-}
-
-impl<'a> ObjectsView<'a> {
-    /// No objects: every Gaussian is background (the baseline and the paper's runs).
-    pub fn none() -> Self {
-        Self {
-            objects: &[],
-            column: &[],
-        }
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.objects.is_empty()
-    }
-
-    /// Drops object rows from the rows the deformation field is evaluated on.
-    pub fn keep_background_rows(&self, rows: &mut Vec<u32>) {
-        if !self.is_empty() {
-            rows.retain(|&r| self.column[r as usize] == NO_OBJECT);
-        }
-    }
-
-    /// Places the object rows of `out` (filled by `deform::apply`) at time `t`.
-    pub fn place(&self, model: &GaussianModel, t: f32, out: &mut Deformed) {
-        if self.is_empty() {
-            return;
-        }
-        let mut rows = Vec::new();
-        place::rows_by_object(self.objects, self.column, &mut rows);
-        place::place(self.objects, &rows, model, t, out, &mut Vec::new());
     }
 }
 
@@ -159,24 +124,10 @@ impl RigidObjects {
         }
     }
 
-    /// The node of a run whose config enables it (reads the training views' ID maps).
-    pub fn for_run(cfg: &crate::TrainConfig, ds: &scene::Dataset) -> crate::Result<Option<Self>> {
-        if !cfg.objects.enabled {
-            return Ok(None);
-        }
+    /// The node of a training run (reads the training views' ID maps).
+    pub fn for_training(cfg: &ObjectsConfig, ds: &scene::Dataset) -> crate::error::Result<Self> {
         let maps = crate::id_maps::load(ds)?;
-        Ok(Some(Self::new(
-            cfg.objects.clone(),
-            maps,
-            crate::id_maps::names(ds),
-        )))
-    }
-
-    pub fn view<'a>(&'a self, column: &'a [u8]) -> ObjectsView<'a> {
-        ObjectsView {
-            objects: &self.objects,
-            column,
-        }
+        Ok(Self::new(cfg.clone(), maps, crate::id_maps::names(ds)))
     }
 
     /// Before the objects start: zero `dL/dimage` on object pixels of training view `frame`,
@@ -294,6 +245,26 @@ impl RigidObjects {
         };
         let votes = aux.get_or_zeros(membership::VOTES_NAME, m.cols())?;
         m.record(ids, weights, stride, &self.id_maps[frame], votes)
+    }
+
+    /// The first non-finite knot of a trajectory, named (a few hundred floats: cheap enough
+    /// to test every iteration).
+    pub fn nonfinite_knot(&self) -> Option<String> {
+        self.objects.iter().find_map(|o| {
+            let t = &o.trajectory;
+            let bad = |k: usize| {
+                t.translations[k]
+                    .iter()
+                    .chain(&t.rotations[k])
+                    .any(|x| !x.is_finite())
+            };
+            (0..t.translations.len()).find(|&k| bad(k)).map(|k| {
+                format!(
+                    "trajectory of object `{}` (knot {k}, t = {})",
+                    o.name, t.times[k]
+                )
+            })
+        })
     }
 
     /// Moves the Gaussians their votes elect into other objects (at densification).

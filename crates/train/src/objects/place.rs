@@ -17,9 +17,7 @@ use crate::deform::{CanonicalGrads, Deformed};
 use crate::model::GaussianModel;
 use crate::quat;
 
-/// No object: the Gaussian belongs to the deformable background (the object-ID maps'
-/// background value).
-pub const NO_OBJECT: u8 = 255;
+pub use crate::state::NO_OBJECT;
 
 /// Rows of each object (in `objects` order), from the per-Gaussian object column.
 pub fn rows_by_object(objects: &[RigidObject], column: &[u8], out: &mut Vec<Vec<u32>>) {

@@ -7,35 +7,27 @@
 use super::gauge::{self, GaugeView};
 use super::lift::{self, DepthMap};
 use super::{RigidObject, RigidObjects, NO_OBJECT};
-use crate::deform::{self, Deformed};
-use crate::field::{DeformField, DeformOutput};
+use crate::deform::Deformed;
 use crate::model::GaussianModel;
 use crate::state::GaussianState;
 use scene::Dataset;
 use splat::Rasterizer;
 
-/// Background depth (object Gaussians left out) in training view `f`, deformed at its time.
+/// Places the rest of the scene (the nodes before the objects') at time t, every row.
+pub type PlaceBackground<'a> = dyn FnMut(&GaussianState, f32, &mut Deformed) + 'a;
+
+/// Background depth (object Gaussians left out) in training view `f`, placed at its time.
 fn background_depth(
     state: &GaussianState,
-    field: Option<&mut DeformField>,
+    background: &mut PlaceBackground<'_>,
     ds: &Dataset,
     f: usize,
     raster: &mut Rasterizer,
 ) -> Result<DepthMap, splat::SplatError> {
     let frame = &ds.train[f];
     let m = &state.model;
-    let mut delta = DeformOutput::default();
     let mut d = Deformed::default();
-    match field {
-        Some(field) => {
-            let rows: Vec<u32> = (0..m.len() as u32)
-                .filter(|&i| state.object[i as usize] == NO_OBJECT)
-                .collect();
-            field.forward(&m.means, frame.time, &rows, &mut delta);
-            deform::apply(m, Some(&delta), &mut d);
-        }
-        None => deform::apply(m, None, &mut d),
-    }
+    background(state, frame.time, &mut d);
     let opacity: Vec<f32> = m
         .opacity_logits
         .iter()
@@ -74,7 +66,7 @@ fn knot_frames(o: &RigidObject, ds: &Dataset) -> Option<Vec<usize>> {
 pub fn regauge(
     node: &mut RigidObjects,
     state: &mut GaussianState,
-    mut field: Option<&mut DeformField>,
+    background: &mut PlaceBackground<'_>,
     ds: &Dataset,
 ) -> Result<Vec<(String, f32)>, splat::SplatError> {
     let mut raster = Rasterizer::new();
@@ -86,13 +78,7 @@ pub fn regauge(
         };
         for &f in &frames {
             if depths[f].is_none() {
-                depths[f] = Some(background_depth(
-                    state,
-                    field.as_deref_mut(),
-                    ds,
-                    f,
-                    &mut raster,
-                )?);
+                depths[f] = Some(background_depth(state, background, ds, f, &mut raster)?);
             }
         }
         let views: Vec<GaugeView> = frames

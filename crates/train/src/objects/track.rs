@@ -119,7 +119,7 @@ impl<'a> Tracker<'a> {
             &mut self.deformed,
             &mut poses,
         );
-        let g = crate::trainer::gaussians(&self.model, &self.deformed);
+        let g = crate::deform::gaussians(&self.model, &self.deformed);
         let opts = RenderOptions::default();
         let out = self.raster.forward(&g, view.cam, &opts)?;
         view.image.to_f32_into(&mut self.gt);

@@ -1,7 +1,7 @@
 //! Every constant of the SemDynReg regularizer (paper Sec. 3.3–3.4), as a TOML/serde section.
 //!
 //! The paper leaves k, λ, λx, λr, λs and τ_d open; the defaults here are starting points to
-//! be replaced by the ablation of issue 6 (README table). The schedule follows the paper's
+//! be replaced by our ablation (README table). The schedule follows the paper's
 //! "activated after an initial training phase (e.g. after 10k iterations)" and
 //! docs/architecture.md item 6 (active to the end of a 40k schedule), and is rescaled with
 //! `--iters` by [`RegConfig::rescaled`].
@@ -163,6 +163,16 @@ impl RegConfig {
             end_iter: scale(self.end_iter),
             ..self.clone()
         }
+    }
+
+    /// The last iteration at which this regularizer is still off (`start_iter − 1`); `None`
+    /// when it is on from the first iteration. Runs keep their checkpoint there, so a
+    /// `[reg]` variant can start from it (`crate::fork`).
+    pub fn fork_point(&self) -> Option<u32> {
+        u32::try_from(self.start_iter)
+            .ok()
+            .and_then(|s| s.checked_sub(1))
+            .filter(|&p| p >= 1)
     }
 
     /// Whether the loss applies at 1-based iteration `iter`.

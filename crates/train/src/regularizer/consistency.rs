@@ -1,4 +1,4 @@
-//! Deformation consistency against ground-truth rigid motion (issue 6, `compare`): how far the
+//! Deformation consistency against ground-truth rigid motion (for `compare`): how far the
 //! Gaussians of a vehicle stray from where the vehicle's true rigid motion puts them.
 //!
 //! Definition. Gaussians are attached to vehicle `o` once, at a reference time `t_ref`: `G_o` is

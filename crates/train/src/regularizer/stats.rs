@@ -1,5 +1,5 @@
-//! Per-object numbers for the training log (issue 6: "per-object group sizes, deviations and
-//! skips in the training log"), one record per object present in the ID map.
+//! Per-object numbers for the training log (group sizes, deviations and skips), one record
+//! per object present in the ID map.
 
 use serde::Serialize;
 

@@ -1,11 +1,13 @@
 //! The deformation field (Deformable-3DGS): (detached canonical mean, t) → (δx, δr, δs),
 //! evaluated on a chosen subset of Gaussians (all, or those that can reach the view).
 
-use crate::config::FieldConfig;
 use crate::encoding::{encode_rows, encode_time, encoded_dim};
 use crate::mlp::{Mlp, MlpCache, PackedRows};
 use crate::time_net::{TimeNet, TimeNetCache};
 use rand::Rng;
+
+pub mod config;
+pub use config::{FieldConfig, MAX_FIELD_PARAMS};
 
 /// Outputs of the field head: δx (3), δr (4), δs (3).
 pub const HEAD: usize = 10;

@@ -1,0 +1,184 @@
+//! The rigid objects as a node of the scene model: rows whose column holds an object's ID,
+//! stored in that object's frame and placed by its trajectory `T_o(t)` (no δ, no
+//! time-varying scale or opacity). The node owns the trajectories and their Adam state,
+//! brings the objects in at `start_iter` and re-applies the occlusion gauge at
+//! `rescale_at` ([`Node::begin_step`]), masks object pixels out of the background's
+//! gradient before the start and records the membership votes ([`Node::after_render`]),
+//! adds the alpha-against-mask term ([`Node::add_loss`]) and moves voted Gaussians between
+//! objects before each refinement ([`Node::before_refine`]).
+
+use super::membership::StepPlacement;
+use super::{regauge, start, ObjectsConfig, RigidObjects};
+use crate::adam::AdamHyper;
+use crate::deform::{CanonicalGrads, Deformed};
+use crate::error::{Result, TrainError};
+use crate::node::{
+    At, Milestone, Node, Placed, Refining, Rendered, Rows, SectionReader, SectionWriter,
+};
+use crate::state::{AuxStore, GaussianState};
+use crate::timing::{Phase, StepTimings};
+use splat::Gradients;
+use std::any::Any;
+use std::time::Instant;
+
+impl RigidObjects {
+    /// The node of a run whose `[objects]` enables it: with the training views' ID maps
+    /// when `dataset` is given (training), without them for rendering a checkpoint.
+    pub fn for_run(cfg: &ObjectsConfig, dataset: Option<&scene::Dataset>) -> Result<Option<Self>> {
+        if !cfg.enabled {
+            return Ok(None);
+        }
+        Ok(Some(match dataset {
+            Some(ds) => Self::for_training(cfg, ds)?,
+            None => Self::new(cfg.clone(), Vec::new(), Vec::new()),
+        }))
+    }
+
+    /// Brings the objects in ([`start`]).
+    fn start_now(&mut self, m: Milestone<'_>) -> Result<()> {
+        let t0 = Instant::now();
+        start::start(self, m.state, m.dataset, m.rng)?;
+        let seconds = t0.elapsed().as_secs_f64();
+        tracing::info!(iteration = m.iteration, seconds, "rigid objects started");
+        Ok(())
+    }
+
+    /// The occlusion gauge again ([`regauge`]), against the rest of the scene placed by the
+    /// nodes before this one.
+    fn regauge_now(&mut self, m: Milestone<'_>) -> Result<()> {
+        let t0 = Instant::now();
+        let (earlier, it) = (m.earlier, m.iteration);
+        let mut background = |st: &GaussianState, time: f32, out: &mut Deformed| {
+            let rows = Rows {
+                model: &st.model,
+                column: &st.object,
+            };
+            let at = At {
+                time,
+                camera: None,
+                iteration: it,
+            };
+            crate::node::place(earlier, rows, &at, out, &mut StepTimings::default());
+        };
+        let applied = regauge::regauge(self, m.state, &mut background, m.dataset)?;
+        let seconds = t0.elapsed().as_secs_f64();
+        tracing::info!(
+            iteration = it,
+            seconds,
+            ?applied,
+            "occlusion gauge applied again"
+        );
+        Ok(())
+    }
+}
+
+impl Node for RigidObjects {
+    fn kind(&self) -> &'static str {
+        "rigid objects"
+    }
+
+    fn owns(&self, id: u8) -> bool {
+        self.objects.iter().any(|o| o.id == id)
+    }
+
+    fn begin_step(&mut self, m: Milestone<'_>) -> Result<()> {
+        if !self.started && m.iteration >= self.cfg.start_iter {
+            self.start_now(m)
+        } else if self.started && self.cfg.rescale_at.contains(&m.iteration) {
+            self.regauge_now(m)
+        } else {
+            Ok(())
+        }
+    }
+
+    fn topk(&self) -> usize {
+        RigidObjects::topk(self)
+    }
+
+    fn place(&mut self, rows: Rows<'_>, at: &At<'_>, out: &mut Deformed, tm: &mut StepTimings) {
+        let t0 = Instant::now();
+        RigidObjects::place(self, rows.model, rows.column, at.time, out);
+        tm.record(Phase::Deform, t0);
+    }
+
+    fn after_render(&mut self, r: Rendered<'_>, aux: &mut AuxStore) -> Result<()> {
+        self.mask_background(r.iteration, r.frame, r.dl_dimage);
+        self.record_votes(r.frame, r.topk_ids, r.topk_weights, r.topk, aux)
+            .map_err(TrainError::Hook)
+    }
+
+    fn add_loss(
+        &mut self,
+        at: &Placed<'_>,
+        grads: &mut Gradients,
+        tm: &mut StepTimings,
+    ) -> Result<f32> {
+        if !self.started {
+            return Ok(0.0);
+        }
+        let t0 = Instant::now();
+        let cam = at.camera;
+        let loss = self.add_mask_loss(at.frame, cam, at.model, at.deformed, grads)?;
+        tm.record(Phase::Objects, t0);
+        Ok(loss)
+    }
+
+    fn backward(
+        &mut self,
+        rows: Rows<'_>,
+        grads: &Gradients,
+        canon: &mut CanonicalGrads,
+        tm: &mut StepTimings,
+    ) {
+        let t0 = Instant::now();
+        RigidObjects::backward(self, rows.model, &grads.means, &grads.quats, canon);
+        tm.record(Phase::Deform, t0);
+    }
+
+    /// Adam on the knots; whether every knot is finite after it.
+    fn step(&mut self, _iteration: u32, hp: AdamHyper) -> bool {
+        RigidObjects::step(self, hp);
+        self.nonfinite_knot().is_none()
+    }
+
+    fn before_refine(&self, state: &mut GaussianState, step: &Refining<'_>) {
+        let at = StepPlacement {
+            deformed: step.deformed,
+            placed: step.placed,
+            time: step.time,
+        };
+        let moved = self.transfer(state, &at);
+        tracing::debug!(
+            iteration = step.iteration,
+            moved,
+            "object membership transfers"
+        );
+    }
+
+    fn nonfinite(&self) -> Option<String> {
+        self.nonfinite_knot()
+    }
+
+    fn save(&self, out: &mut dyn SectionWriter) {
+        out.meta("objects", super::store::metadata(self));
+        super::store::write_tensors(self, &mut |name, shape, v| out.tensor(name, shape, v));
+    }
+
+    /// Trajectories and their Adam state together (a few hundred floats).
+    fn load(&mut self, sec: &dyn SectionReader) -> Result<()> {
+        let tensor = |name: &str, len: usize| sec.f32s(name, len);
+        let stored = super::store::read(sec.meta("objects"), tensor, |p| sec.problem(p))?;
+        self.started = stored.started;
+        self.objects = stored.objects;
+        self.knot_adam = stored.knot_adam;
+        Ok(())
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+}

@@ -680,6 +680,7 @@ def main():
     stack = []
     log = []
     t_train = time.time()
+    cpu0 = time.process_time()
     ema = 0.0
     for it in range(1, S["iterations"] + 1):
         if it % S["sh_interval"] == 0 and G.sh_degree < 3:
@@ -741,6 +742,7 @@ def main():
             log.append(rec)
             print(json.dumps(rec), flush=True)
     wall = time.time() - t_train
+    cpu_train = time.process_time() - cpu0
     active = S["iterations"] >= S["warm_up"]
     field.eval()
     ev = evaluate(torch, T, G, field, evalf, bg, active)
@@ -754,6 +756,7 @@ def main():
         resolution=[train[0]["width"], train[0]["height"]],
         gaussians=len(G),
         wall_train_s=wall,
+        cpu_train_s=cpu_train,
         wall_total_s=time.time() - t0,
         torch=torch.__version__,
         threads=torch.get_num_threads(),

@@ -47,7 +47,6 @@ pub fn output_dir(run: &Path, what: &str, iteration: Option<u32>) -> PathBuf {
 
 /// One checkpoint of a run (the latest unless chosen) with its data set.
 pub struct LoadedRun {
-    pub cfg: TrainConfig,
     pub model: GaussianModel,
     pub iteration: u32,
     /// Rigid objects (empty for runs without them), for selecting and naming, and the
@@ -71,7 +70,6 @@ impl LoadedRun {
             .with_context(|| format!("loading {}", info.scene.display()))?;
         Ok(Self {
             objects: m.objects().to_vec(),
-            cfg: m.cfg,
             model: m.model,
             iteration: m.iteration,
             column: m.column,

@@ -76,8 +76,17 @@ pub fn run(a: Args) -> Result<()> {
         .with_context(|| format!("loading {}", a.scene.display()))?;
     let refs = scene::load_dataset(&a.reference, &opts)
         .with_context(|| format!("loading the reference {}", a.reference.display()))?;
-    let ef: Vec<&Frame> = est.all_frames().collect();
-    let rf: Vec<&Frame> = refs.all_frames().collect();
+    // val often repeats test (Nerfies, the every-8th holdout): each frame once.
+    let once = |ds: &'_ scene::Dataset| -> Vec<Frame> {
+        let mut seen = std::collections::HashSet::new();
+        ds.all_frames()
+            .filter(|f| seen.insert(f.file_path.clone()))
+            .cloned()
+            .collect()
+    };
+    let (e_all, r_all) = (once(&est), once(&refs));
+    let ef: Vec<&Frame> = e_all.iter().collect();
+    let rf: Vec<&Frame> = r_all.iter().collect();
     let (pairs, by) = pair(&ef, &rf)?;
     let r: Vec<splat::Camera> = pairs.iter().map(|p| p.1.camera.clone()).collect();
     let e: Vec<splat::Camera> = pairs.iter().map(|p| p.0.camera.clone()).collect();

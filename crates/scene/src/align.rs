@@ -73,6 +73,31 @@ pub fn umeyama(src: &[[f64; 3]], dst: &[[f64; 3]]) -> Option<Similarity> {
     (scale.is_finite() && scale > 0.0).then_some(s)
 }
 
+/// Scale and translation of the least-squares similarity `src → dst` with its rotation
+/// given.
+fn with_rotation(src: &[[f64; 3]], dst: &[[f64; 3]], rotation: [[f64; 3]; 3]) -> Option<Similarity> {
+    let n = src.len() as f64;
+    let mean = |p: &[[f64; 3]]| -> [f64; 3] {
+        std::array::from_fn(|k| p.iter().map(|v| v[k]).sum::<f64>() / n)
+    };
+    let (ms, md) = (mean(src), mean(dst));
+    let (mut num, mut den) = (0.0, 0.0);
+    for (s, d) in src.iter().zip(dst) {
+        let a: [f64; 3] = std::array::from_fn(|k| s[k] - ms[k]);
+        let ra: [f64; 3] = std::array::from_fn(|i| (0..3).map(|k| rotation[i][k] * a[k]).sum());
+        num += (0..3).map(|k| ra[k] * (d[k] - md[k])).sum::<f64>();
+        den += a.iter().map(|v| v * v).sum::<f64>();
+    }
+    let scale = num / den;
+    let rms: [f64; 3] = std::array::from_fn(|i| (0..3).map(|k| rotation[i][k] * ms[k]).sum());
+    let translation = std::array::from_fn(|i| md[i] - scale * rms[i]);
+    (scale.is_finite() && scale > 0.0).then_some(Similarity {
+        scale,
+        rotation,
+        translation,
+    })
+}
+
 /// The rotation `R` maximizing trace(Rᵀ·M) for the cross-covariance `M = Σ d sᵀ`.
 fn horn_rotation(m: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
     // Horn's N with S = Mᵀ in his notation (S_ab = Σ s_a d_b).
@@ -212,9 +237,24 @@ pub fn compare_cameras(
     let e: Vec<_> = estimate.iter().map(centre_rot).collect();
     let rc: Vec<[f64; 3]> = r.iter().map(|x| x.0).collect();
     let ec: Vec<[f64; 3]> = e.iter().map(|x| x.0).collect();
-    let sim = umeyama(&ec, &rc).ok_or_else(|| {
-        "cannot align: fewer than 3 cameras, or the estimated centres coincide".to_string()
-    })?;
+    // The rotation from the cameras' orientations (the rotation closest to
+    // Σ R_ref·R_estᵀ): centres alone leave it undetermined about the line of a nearly
+    // straight camera path. Scale and translation then from the centres (Umeyama's, given R).
+    let mut m = [[0.0f64; 3]; 3];
+    for ((_, re), (_, rr)) in e.iter().zip(&r) {
+        for i in 0..3 {
+            for j in 0..3 {
+                m[i][j] += (0..3).map(|k| rr[i][k] * re[j][k]).sum::<f64>();
+            }
+        }
+    }
+    let rotation = horn_rotation(&m);
+    let sim = (ec.len() >= 3)
+        .then(|| with_rotation(&ec, &rc, rotation))
+        .flatten()
+        .ok_or_else(|| {
+            "cannot align: fewer than 3 cameras, or the estimated centres coincide".to_string()
+        })?;
     let n = rc.len() as f64;
     let mean: [f64; 3] = std::array::from_fn(|k| rc.iter().map(|c| c[k]).sum::<f64>() / n);
     let extent = 1.1
@@ -333,7 +373,9 @@ mod tests {
         let mut ests = refs.clone();
         ests[2] = cam(c[2], tilt);
         let e = compare_cameras(&refs, &ests).unwrap();
-        assert!((e.rotation_errors_deg[2] - 1.0).abs() < 1e-3, "{e:?}");
-        assert!(e.rotation_median_deg < 1e-3);
+        // The alignment's rotation is the cameras' mean: it takes a fifth of the tilt, the
+        // others show that fifth and the tilted camera the rest.
+        let r = &e.rotation_errors_deg;
+        assert!((r[2] + r[0] - 1.0).abs() < 1e-3 && (r[0] - 0.2).abs() < 1e-2, "{e:?}");
     }
 }

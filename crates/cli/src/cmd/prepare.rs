@@ -56,6 +56,12 @@ pub struct Args {
     /// models with distortion are undistorted before the scene is written.
     #[arg(long, default_value = "SIMPLE_RADIAL")]
     camera_model: String,
+    /// Known intrinsics in --camera-model's parameter order (e.g. "f,cx,cy,k" for
+    /// SIMPLE_RADIAL, "fx,fy,cx,cy" for PINHOLE), in pixels of the frames after
+    /// --downscale; held fixed by COLMAP. Without it COLMAP estimates them, which a scene
+    /// with little depth (a flat table seen from one side) leaves ambiguous.
+    #[arg(long, value_name = "P1,P2,...")]
+    camera_params: Option<String>,
     /// One camera (intrinsics) shared by all frames: true for one video or one phone;
     /// false for photos from several cameras.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
@@ -76,6 +82,29 @@ pub struct Args {
 enum Matcher {
     Sequential,
     Exhaustive,
+}
+
+/// `--camera-params` checked against the model's parameter count, in COLMAP's form.
+fn parse_camera_params(text: &str, model_id: usize) -> Result<String> {
+    let (model, count) = colmap::CAMERA_MODELS[model_id];
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .ok()
+        .filter(|v: &Vec<f64>| v.iter().all(|x| x.is_finite()))
+        .with_context(|| format!("--camera-params {text}: not a comma-separated list of numbers"))?;
+    if values.len() != count {
+        bail!(
+            "--camera-params {text}: {model} takes {count} parameters, {} given",
+            values.len()
+        );
+    }
+    Ok(values
+        .iter()
+        .map(|v| v.to_string())
+        .collect::<Vec<_>>()
+        .join(","))
 }
 
 /// One frame as extracted, before COLMAP.
@@ -110,6 +139,8 @@ struct PrepareReport {
     matcher: Matcher,
     camera_model: String,
     single_camera: bool,
+    /// Whether the intrinsics were given (--camera-params) and held fixed.
+    intrinsics_given: bool,
     undistorted: bool,
     /// Pinhole intrinsics of the written images (first camera), in pixels.
     camera: BTreeMap<&'static str, f64>,
@@ -138,6 +169,11 @@ pub fn run(a: Args) -> Result<()> {
             )
         })?;
     let camera_model = colmap::CAMERA_MODELS[model_id].0.to_string();
+    let camera_params = a
+        .camera_params
+        .as_deref()
+        .map(|p| parse_camera_params(p, model_id))
+        .transpose()?;
     let is_video = if a.input.is_dir() {
         false
     } else if a.input.is_file() {
@@ -236,6 +272,8 @@ pub fn run(a: Args) -> Result<()> {
             &camera_model,
             "--ImageReader.single_camera",
             if a.single_camera { "1" } else { "0" },
+            "--ImageReader.camera_params",
+            camera_params.as_deref().unwrap_or(""),
             "--SiftExtraction.use_gpu",
             "0",
             "--SiftExtraction.num_threads",
@@ -286,6 +324,11 @@ pub fn run(a: Args) -> Result<()> {
             &s(&sparse),
             "--Mapper.num_threads",
             &threads,
+            // Given intrinsics stay as given.
+            "--Mapper.ba_refine_focal_length",
+            if camera_params.is_some() { "0" } else { "1" },
+            "--Mapper.ba_refine_extra_params",
+            if camera_params.is_some() { "0" } else { "1" },
         ],
         "Registering image #",
     )
@@ -439,6 +482,7 @@ pub fn run(a: Args) -> Result<()> {
         matcher: a.matcher,
         camera_model: camera_model.clone(),
         single_camera: a.single_camera,
+        intrinsics_given: camera_params.is_some(),
         undistorted: distorted,
         camera: BTreeMap::from([
             ("fx", cam0[0]),

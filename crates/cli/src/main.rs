@@ -24,10 +24,12 @@ struct Cli {
 enum Command {
     // SUBCOMMANDS (one line each, alphabetical)
     Compare(cmd::compare::Args),
+    ComparePoses(cmd::compare_poses::Args),
     Demo(cmd::demo::Args),
     Eval(cmd::eval::Args),
     Export(cmd::export::Args),
     Metrics(cmd::metrics::Args),
+    Prepare(cmd::prepare::Args),
     Render(cmd::render::Args),
     Segment(cmd::segment::Args),
     Sweep(cmd::sweep::Args),
@@ -55,10 +57,12 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         // DISPATCH (one arm each)
         Command::Compare(a) => cmd::compare::run(a),
+        Command::ComparePoses(a) => cmd::compare_poses::run(a),
         Command::Demo(a) => cmd::demo::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Metrics(a) => cmd::metrics::run(a),
+        Command::Prepare(a) => cmd::prepare::run(a),
         Command::Render(a) => cmd::render::run(a),
         Command::Segment(a) => cmd::segment::run(a),
         Command::Sweep(a) => cmd::sweep::run(a),

@@ -1,7 +1,7 @@
 //! The in-memory data set every format is loaded into, and the paths of the per-frame
 //! files other crates keep beside it (ground-truth masks, cached object-ID maps).
 
-use crate::{dnerf, nerfies, ImageU8, SceneError};
+use crate::{colmap, dnerf, llff, nerfies, nerfstudio, ImageU8, SceneError};
 use std::path::{Path, PathBuf};
 
 /// One image with its camera and time.
@@ -23,6 +23,12 @@ pub enum DatasetKind {
     DNerf,
     /// Nerfies / HyperNeRF `dataset.json` + `metadata.json` + `camera/*.json`.
     Nerfies,
+    /// nerfstudio `transforms.json` (one file, per-frame `time` optional).
+    Nerfstudio,
+    /// LLFF `poses_bounds.npy`, or `precomputed.json` (poses after nerf-pytorch's loader).
+    Llff,
+    /// A COLMAP sparse model (`sparse/0/` or `sparse/`, binary or text) with `images/`.
+    Colmap,
 }
 
 /// A loaded scene: frames of each split, as u8 images.
@@ -117,8 +123,39 @@ pub fn semantics_path(root: &Path, file_path: &str) -> PathBuf {
     root.join("semantics").join(format!("{file_path}.png"))
 }
 
-/// Loads a scene folder, detecting the format: `transforms_train.json` → D-NeRF,
-/// `dataset.json` → Nerfies/HyperNeRF.
+/// The scene layouts [`load_dataset`] recognizes, in the order it tries them, each with
+/// the file that marks it.
+pub const LAYOUTS: [(&str, &str); 6] = [
+    ("transforms_train.json", "D-NeRF"),
+    ("dataset.json", "Nerfies"),
+    ("transforms.json", "nerfstudio"),
+    ("poses_bounds.npy", "LLFF"),
+    ("precomputed.json", "LLFF (nerf-pytorch poses)"),
+    ("sparse/0/cameras.{bin,txt}", "COLMAP"),
+];
+
+/// Which layout a scene folder holds (`None`: none recognized), by the first marker file
+/// of [`LAYOUTS`] present.
+pub fn detect_kind(path: &Path) -> Option<DatasetKind> {
+    if path.join("transforms_train.json").is_file() {
+        Some(DatasetKind::DNerf)
+    } else if path.join("dataset.json").is_file() {
+        Some(DatasetKind::Nerfies)
+    } else if path.join("transforms.json").is_file() {
+        Some(DatasetKind::Nerfstudio)
+    } else if path.join("poses_bounds.npy").is_file() || path.join("precomputed.json").is_file() {
+        Some(DatasetKind::Llff)
+    } else if colmap::find_model_dir(path).is_some() {
+        Some(DatasetKind::Colmap)
+    } else {
+        None
+    }
+}
+
+/// Loads a scene folder, detecting the format ([`LAYOUTS`]): `transforms_train.json` →
+/// D-NeRF, `dataset.json` → Nerfies/HyperNeRF, `transforms.json` → nerfstudio,
+/// `poses_bounds.npy` or `precomputed.json` → LLFF, `sparse/0/` (or `sparse/`, or the
+/// folder itself) holding `cameras.bin`/`.txt` → COLMAP.
 pub fn load_dataset(path: &Path, opts: &LoadOptions) -> Result<Dataset, SceneError> {
     if opts.downscale == 0 {
         return Err(SceneError::Argument("downscale factor must be ≥ 1".into()));
@@ -129,15 +166,25 @@ pub fn load_dataset(path: &Path, opts: &LoadOptions) -> Result<Dataset, SceneErr
             "not a folder (expected a scene folder)",
         ));
     }
-    let ds = if path.join("transforms_train.json").is_file() {
-        dnerf::load(path, opts)?
-    } else if path.join("dataset.json").is_file() {
-        nerfies::load(path, opts)?
-    } else {
-        return Err(SceneError::invalid(
-            path,
-            "unknown scene format: neither transforms_train.json (D-NeRF) nor dataset.json (Nerfies) found",
-        ));
+    let ds = match detect_kind(path) {
+        Some(DatasetKind::DNerf) => dnerf::load(path, opts)?,
+        Some(DatasetKind::Nerfies) => nerfies::load(path, opts)?,
+        Some(DatasetKind::Nerfstudio) => nerfstudio::load(path, opts)?,
+        Some(DatasetKind::Llff) => llff::load(path, opts)?,
+        Some(DatasetKind::Colmap) => colmap::load(path, opts)?,
+        None => {
+            let known: Vec<String> = LAYOUTS
+                .iter()
+                .map(|(file, name)| format!("{file} ({name})"))
+                .collect();
+            return Err(SceneError::invalid(
+                path,
+                format!(
+                    "unknown scene format: none of {} found (a video or a folder of images: `semdynreg prepare`)",
+                    known.join(", ")
+                ),
+            ));
+        }
     };
     tracing::info!(
         "{}: {:?} scene, {} train / {} val / {} test frames",

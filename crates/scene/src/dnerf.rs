@@ -3,7 +3,7 @@
 //! Follows Deformable-3DGS `readCamerasFromTransforms`: `transform_matrix` is
 //! camera-to-world in OpenGL axes (y up, z backward); negating its y and z columns gives
 //! OpenCV axes, and its inverse is the world-to-camera `viewmat` (docs/architecture.md).
-//! Intrinsics: `fl_x fl_y cx cy` when present, else `fx = fy = W / (2·tan(camera_angle_x/2))`
+//! Intrinsics: `fl_x fl_y cx cy` when present (per frame, else at the top level), else `fx = fy = W / (2·tan(camera_angle_x/2))`
 //! and the principal point at the image centre.
 
 use crate::math::{invert, to_f32, Mat4};
@@ -29,6 +29,12 @@ struct FrameJson {
     file_path: String,
     time: Option<f64>,
     transform_matrix: Vec<Vec<f64>>,
+    // Per-frame intrinsics (nerfstudio's convention, written by `semdynreg prepare` when
+    // frames have different cameras) override the top-level ones.
+    fl_x: Option<f64>,
+    fl_y: Option<f64>,
+    cx: Option<f64>,
+    cy: Option<f64>,
 }
 
 /// Loads a D-NeRF scene folder. `transforms_train.json` is required; val/test are loaded
@@ -71,7 +77,10 @@ fn load_split(root: &Path, json_path: &Path, opts: &LoadOptions) -> Result<Vec<F
     if meta.frames.is_empty() {
         return Err(SceneError::invalid(json_path, "`frames` is empty"));
     }
-    if meta.camera_angle_x.is_none() && meta.fl_x.is_none() {
+    if meta.camera_angle_x.is_none()
+        && meta.fl_x.is_none()
+        && meta.frames.iter().any(|f| f.fl_x.is_none())
+    {
         return Err(SceneError::invalid(
             json_path,
             "neither `camera_angle_x` nor `fl_x` is given",
@@ -139,7 +148,7 @@ fn load_frame(
             format!("frame {index}: time is not finite"),
         ));
     }
-    let camera = intrinsics(meta, image.width, image.height, viewmat, opts.downscale)
+    let camera = intrinsics(meta, f, image.width, image.height, viewmat, opts.downscale)
         .map_err(|msg| SceneError::invalid(json_path, format!("frame {index}: {msg}")))?;
     let image = image.downscale(opts.downscale);
     if image.width == 0 || image.height == 0 {
@@ -234,17 +243,18 @@ pub(crate) fn opengl_c2w_to_viewmat(c2w: &Mat4) -> Option<[[f32; 4]; 4]> {
 
 fn intrinsics(
     meta: &TransformsJson,
+    frame: &FrameJson,
     width: u32,
     height: u32,
     viewmat: [[f32; 4]; 4],
     downscale: u32,
 ) -> Result<splat::Camera, String> {
-    let fx = meta.fl_x.unwrap_or_else(|| {
+    let fx = frame.fl_x.or(meta.fl_x).unwrap_or_else(|| {
         0.5 * f64::from(width) / (0.5 * meta.camera_angle_x.unwrap_or(1.0)).tan()
     });
-    let fy = meta.fl_y.unwrap_or(fx);
-    let cx = meta.cx.unwrap_or(0.5 * f64::from(width));
-    let cy = meta.cy.unwrap_or(0.5 * f64::from(height));
+    let fy = frame.fl_y.or(meta.fl_y).unwrap_or(fx);
+    let cx = frame.cx.or(meta.cx).unwrap_or(0.5 * f64::from(width));
+    let cy = frame.cy.or(meta.cy).unwrap_or(0.5 * f64::from(height));
     // A factor-f box filter maps pixel coordinate u to u/f exactly (edges stay on edges).
     let s = 1.0 / f64::from(downscale.max(1));
     let (fx, fy, cx, cy) = (

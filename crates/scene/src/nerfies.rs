@@ -278,29 +278,7 @@ fn read_points(root: &Path, scene: &SceneJson) -> Result<Option<Vec<[f32; 3]>>, 
     if !path.is_file() {
         return Ok(None);
     }
-    let bytes = std::fs::read(&path).map_err(|e| SceneError::io(&path, e))?;
-    check_npy_preamble(&bytes).map_err(|m| SceneError::invalid(&path, m))?;
-    let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| SceneError::io(&path, e))?;
-    let shape = npy.shape().to_vec();
-    if shape.len() != 2 || shape[1] != 3 {
-        return Err(SceneError::invalid(
-            &path,
-            format!("expected shape (N, 3), found {shape:?}"),
-        ));
-    }
-    let flat: Vec<f64> = match npy.dtype() {
-        npyz::DType::Plain(t) if t.size_field() == 4 => npy
-            .into_vec::<f32>()
-            .map(|v| v.into_iter().map(f64::from).collect()),
-        _ => npy.into_vec::<f64>(),
-    }
-    .map_err(|e| SceneError::io(&path, e))?;
-    if let Some(i) = flat.iter().position(|v| !v.is_finite()) {
-        return Err(SceneError::invalid(
-            &path,
-            format!("value {i} ({}) is not finite", flat[i]),
-        ));
-    }
+    let flat = read_npy_f64(&path, 3)?;
     Ok(Some(
         flat.chunks_exact(3)
             .map(|p| {
@@ -312,6 +290,45 @@ fn read_points(root: &Path, scene: &SceneJson) -> Result<Option<Vec<[f32; 3]>>, 
             })
             .collect(),
     ))
+}
+
+/// A `.npy` array of shape (N, `cols`), f32 or f64, flattened; non-finite values refused.
+pub(crate) fn read_npy_f64(path: &Path, cols: u64) -> Result<Vec<f64>, SceneError> {
+    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    check_npy_preamble(&bytes).map_err(|m| SceneError::invalid(path, m))?;
+    let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| SceneError::io(path, e))?;
+    let shape = npy.shape().to_vec();
+    if shape.len() != 2 || shape[1] != cols {
+        return Err(SceneError::invalid(
+            path,
+            format!("expected shape (N, {cols}), found {shape:?}"),
+        ));
+    }
+    // The data must be there before npyz allocates the shape's worth of values.
+    let need = shape[0].checked_mul(cols).and_then(|n| n.checked_mul(4));
+    if need.is_none_or(|n| n > bytes.len() as u64) {
+        return Err(SceneError::invalid(
+            path,
+            format!(
+                "shape {shape:?} does not fit in the file's {} bytes",
+                bytes.len()
+            ),
+        ));
+    }
+    let flat: Vec<f64> = match npy.dtype() {
+        npyz::DType::Plain(t) if t.size_field() == 4 => npy
+            .into_vec::<f32>()
+            .map(|v| v.into_iter().map(f64::from).collect()),
+        _ => npy.into_vec::<f64>(),
+    }
+    .map_err(|e| SceneError::io(path, e))?;
+    if let Some(i) = flat.iter().position(|v| !v.is_finite()) {
+        return Err(SceneError::invalid(
+            path,
+            format!("value {i} ({}) is not finite", flat[i]),
+        ));
+    }
+    Ok(flat)
 }
 
 /// The `.npy` header length must fit in the file: npyz allocates it before reading, and in

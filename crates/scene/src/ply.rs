@@ -57,6 +57,40 @@ pub fn read_points_rgb(path: &Path) -> Result<PointsRgb, SceneError> {
     Ok((points, colors))
 }
 
+/// Writes `points` (and `colors` in [0, 1], as `uchar red green blue`) as a binary
+/// little-endian PLY, atomically: what [`read_points_rgb`] and 3DGS's `fetchPly` read.
+pub fn write_points_rgb(
+    path: &Path,
+    points: &[[f32; 3]],
+    colors: Option<&[[f32; 3]]>,
+) -> Result<(), SceneError> {
+    if colors.is_some_and(|c| c.len() != points.len()) {
+        return Err(SceneError::Argument(format!(
+            "{} points but {} colours",
+            points.len(),
+            colors.map_or(0, <[_]>::len)
+        )));
+    }
+    let mut b = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n",
+        points.len()
+    )
+    .into_bytes();
+    if colors.is_some() {
+        b.extend(b"property uchar red\nproperty uchar green\nproperty uchar blue\n");
+    }
+    b.extend(b"end_header\n");
+    for (i, p) in points.iter().enumerate() {
+        for v in p {
+            b.extend(v.to_le_bytes());
+        }
+        if let Some(c) = colors {
+            b.extend(c[i].map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8));
+        }
+    }
+    crate::io::write_atomic(path, |w| w.write_all(&b))
+}
+
 /// Positions and, when the file has them, colours in [0, 1].
 pub type PointsRgb = (Vec<[f32; 3]>, Option<Vec<[f32; 3]>>);
 

@@ -1,7 +1,9 @@
-//! Seeded mutation fuzzing of every file the `scene` crate reads
-//! (docs/robustness.md): D-NeRF `transforms_*.json` and its PNG frames, Nerfies
-//! `dataset.json`, `metadata.json`, `scene.json`, `camera/*.json` and `points.npy`, PNG
-//! images and object-ID masks on their own, `points3d.ply`, `objects.json`.
+//! Seeded mutation fuzzing of every file the `scene` crate reads (docs/robustness.md):
+//! D-NeRF `transforms_*.json` and its PNG frames, Nerfies `dataset.json`, `metadata.json`,
+//! `scene.json`, `camera/*.json` and `points.npy`, COLMAP sparse models (`cameras`,
+//! `images`, `points3D`, binary and text), LLFF `poses_bounds.npy` and `precomputed.json`,
+//! nerfstudio `transforms.json`, PNG images and object-ID masks on their own,
+//! `points3d.ply`, `objects.json`.
 //!
 //! Property per case (tests/fuzz_common): no panic, no hang, no allocation above the limit,
 //! an error that names the file; a loaded data set must also be sane (finite cameras with
@@ -19,6 +21,9 @@
 #[macro_use]
 #[path = "fuzz_common/mod.rs"]
 mod fuzz_common;
+
+#[path = "formats_common/mod.rs"]
+mod formats_common;
 
 use fuzz_common::{apply, check_load, crc32, finish, mutations, runner, Kind, Mutation, Tally};
 use proptest::prelude::*;
@@ -60,6 +65,51 @@ fn binary_ply() -> Vec<u8> {
 
 fn ascii_ply() -> Vec<u8> {
     b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nproperty short red\nproperty short green\nproperty short blue\nend_header\n0 0 0 1 2 3\n1.5 -2 3e2 32767 0 100\n-1 -1 -1 5 5 5\n".to_vec()
+}
+
+/// A scene of 6 frames written by `write` (formats_common), kept for the whole run.
+fn layout_seed(
+    cell: &'static OnceLock<tempfile::TempDir>,
+    write: fn(&Path, &[splat::Camera]),
+) -> &'static Path {
+    cell.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        write(dir.path(), &formats_common::arc_cameras(6, 16, 12, 14.0));
+        dir
+    })
+    .path()
+}
+
+fn colmap_bin_seed() -> &'static Path {
+    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
+    layout_seed(&DIR, |p, c| {
+        formats_common::write_colmap(p, c, scene::colmap::ModelFormat::Binary)
+    })
+}
+
+fn colmap_txt_seed() -> &'static Path {
+    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
+    layout_seed(&DIR, |p, c| {
+        formats_common::write_colmap(p, c, scene::colmap::ModelFormat::Text)
+    })
+}
+
+fn llff_seed() -> &'static Path {
+    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
+    layout_seed(&DIR, formats_common::write_llff_npy)
+}
+
+fn precomputed_seed() -> &'static Path {
+    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
+    layout_seed(&DIR, formats_common::write_precomputed)
+}
+
+fn nerfstudio_seed() -> &'static Path {
+    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
+    layout_seed(&DIR, |p, c| {
+        let t: Vec<f64> = (0..c.len()).map(|k| 0.1 * k as f64).collect();
+        formats_common::write_nerfstudio(p, c, Some(&t))
+    })
 }
 
 /// A tiny Nerfies scene: 4 ids (3 train, 1 val), cameras, 1x PNGs, scene.json, points.npy.
@@ -481,6 +531,15 @@ formats! {
     fuzz_nerfies_camera_json: 400 => |n| fuzz_scene_file("Nerfies camera/*.json", nerfies_seed(), "camera/b.json", Kind::Json, n);
     fuzz_nerfies_frame_png: 150 => |n| fuzz_scene_file("Nerfies rgb/1x PNG", nerfies_seed(), "rgb/1x/a.png", Kind::Binary, n);
     fuzz_nerfies_points_npy: 300 => |n| fuzz_scene_file("Nerfies points.npy", nerfies_seed(), "points.npy", Kind::Text, n);
+    fuzz_colmap_cameras_bin: 300 => |n| fuzz_scene_file("COLMAP cameras.bin", colmap_bin_seed(), "sparse/0/cameras.bin", Kind::Binary, n);
+    fuzz_colmap_images_bin: 400 => |n| fuzz_scene_file("COLMAP images.bin", colmap_bin_seed(), "sparse/0/images.bin", Kind::Binary, n);
+    fuzz_colmap_points_bin: 300 => |n| fuzz_scene_file("COLMAP points3D.bin", colmap_bin_seed(), "sparse/0/points3D.bin", Kind::Binary, n);
+    fuzz_colmap_cameras_txt: 200 => |n| fuzz_scene_file("COLMAP cameras.txt", colmap_txt_seed(), "sparse/0/cameras.txt", Kind::Text, n);
+    fuzz_colmap_images_txt: 300 => |n| fuzz_scene_file("COLMAP images.txt", colmap_txt_seed(), "sparse/0/images.txt", Kind::Text, n);
+    fuzz_colmap_points_txt: 200 => |n| fuzz_scene_file("COLMAP points3D.txt", colmap_txt_seed(), "sparse/0/points3D.txt", Kind::Text, n);
+    fuzz_llff_poses_bounds: 300 => |n| fuzz_scene_file("LLFF poses_bounds.npy", llff_seed(), "poses_bounds.npy", Kind::Text, n);
+    fuzz_llff_precomputed: 250 => |n| fuzz_scene_file("LLFF precomputed.json", precomputed_seed(), "precomputed.json", Kind::Json, n);
+    fuzz_nerfstudio_transforms: 400 => |n| fuzz_scene_file("nerfstudio transforms.json", nerfstudio_seed(), "transforms.json", Kind::Json, n);
     fuzz_ply_points: 600 => ply_points;
     fuzz_objects_json: 400 => objects_json;
     fuzz_png_image: 600 => png_image;

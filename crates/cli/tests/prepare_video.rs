@@ -202,7 +202,11 @@ fn a_synthetic_video_gives_back_its_cameras() {
     // The given intrinsics are the scene's.
     assert_eq!(report["intrinsics_given"], true);
     let fx = ds.train[0].camera.fx;
-    assert!((fx / truth.fx - 1.0).abs() < 1e-4, "fx {fx} vs {}", truth.fx);
+    assert!(
+        (fx / truth.fx - 1.0).abs() < 1e-4,
+        "fx {fx} vs {}",
+        truth.fx
+    );
 
     // The same check through the command, against the generated scene's own cameras.
     let o = semdynreg(

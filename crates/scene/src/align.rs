@@ -75,7 +75,11 @@ pub fn umeyama(src: &[[f64; 3]], dst: &[[f64; 3]]) -> Option<Similarity> {
 
 /// Scale and translation of the least-squares similarity `src → dst` with its rotation
 /// given.
-fn with_rotation(src: &[[f64; 3]], dst: &[[f64; 3]], rotation: [[f64; 3]; 3]) -> Option<Similarity> {
+fn with_rotation(
+    src: &[[f64; 3]],
+    dst: &[[f64; 3]],
+    rotation: [[f64; 3]; 3],
+) -> Option<Similarity> {
     let n = src.len() as f64;
     let mean = |p: &[[f64; 3]]| -> [f64; 3] {
         std::array::from_fn(|k| p.iter().map(|v| v[k]).sum::<f64>() / n)
@@ -376,6 +380,9 @@ mod tests {
         // The alignment's rotation is the cameras' mean: it takes a fifth of the tilt, the
         // others show that fifth and the tilted camera the rest.
         let r = &e.rotation_errors_deg;
-        assert!((r[2] + r[0] - 1.0).abs() < 1e-3 && (r[0] - 0.2).abs() < 1e-2, "{e:?}");
+        assert!(
+            (r[2] + r[0] - 1.0).abs() < 1e-3 && (r[0] - 0.2).abs() < 1e-2,
+            "{e:?}"
+        );
     }
 }

@@ -93,7 +93,9 @@ fn parse_camera_params(text: &str, model_id: usize) -> Result<String> {
         .collect::<Result<_, _>>()
         .ok()
         .filter(|v: &Vec<f64>| v.iter().all(|x| x.is_finite()))
-        .with_context(|| format!("--camera-params {text}: not a comma-separated list of numbers"))?;
+        .with_context(|| {
+            format!("--camera-params {text}: not a comma-separated list of numbers")
+        })?;
     if values.len() != count {
         bail!(
             "--camera-params {text}: {model} takes {count} parameters, {} given",

@@ -595,7 +595,7 @@ mod text {
             let mut points2d = Vec::new();
             if let Some((pl, p)) = it.next() {
                 let toks: Vec<&str> = p.split_whitespace().collect();
-                if toks.len() % 3 != 0 {
+                if !toks.len().is_multiple_of(3) {
                     return Err(format!(
                         "line {pl}: POINTS2D is not a list of X Y POINT3D_ID"
                     ));
@@ -641,7 +641,7 @@ mod text {
             ];
             let error = num(t.next(), ln, "ERROR")?;
             let rest: Vec<&str> = t.collect();
-            if rest.len() % 2 != 0 {
+            if !rest.len().is_multiple_of(2) {
                 return Err(format!(
                     "line {ln}: TRACK is not a list of IMAGE_ID POINT2D_IDX"
                 ));
@@ -845,7 +845,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, SceneError> {
 }
 
 /// Positions and colours of a model's points (`None` when it has none).
-pub fn points_of(model: &ColmapModel) -> (Option<Vec<[f32; 3]>>, Option<Vec<[f32; 3]>>) {
+pub fn points_of(model: &ColmapModel) -> PointsPair {
     let pts: Vec<&ColmapPoint> = model
         .points
         .iter()
@@ -960,7 +960,8 @@ pub(crate) fn read_points_of_dir(dir: &Path) -> Result<PointsPair, SceneError> {
     Ok(points_of(&read_model(dir)?))
 }
 
-pub(crate) type PointsPair = (Option<Vec<[f32; 3]>>, Option<Vec<[f32; 3]>>);
+/// Positions and colours of a point cloud, each `None` when absent.
+pub type PointsPair = (Option<Vec<[f32; 3]>>, Option<Vec<[f32; 3]>>);
 
 #[cfg(test)]
 mod tests {

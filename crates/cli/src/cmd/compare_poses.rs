@@ -126,7 +126,7 @@ pub fn run(a: Args) -> Result<()> {
         });
         scene::io::write_json(path, &v)?;
     }
-    if a.max_centre.is_some_and(|m| !(errs.centre_max_rel <= m)) {
+    if a.max_centre.is_some_and(|m| above(errs.centre_max_rel, m)) {
         bail!(
             "largest centre error {:.3} % is above --max-centre {:.3} %",
             100.0 * errs.centre_max_rel,
@@ -134,7 +134,7 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
     if a.max_rotation_deg
-        .is_some_and(|m| !(errs.rotation_median_deg <= m))
+        .is_some_and(|m| above(errs.rotation_median_deg, m))
     {
         bail!(
             "median rotation error {:.3}° is above --max-rotation-deg {}",
@@ -143,4 +143,9 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// `value > bound`, and true for a NaN value (an error that cannot be measured fails).
+fn above(value: f64, bound: f64) -> bool {
+    value.is_nan() || value > bound
 }

@@ -66,6 +66,13 @@ pub struct Args {
     /// false for photos from several cameras.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     single_camera: bool,
+    /// Folder of per-frame masks of what moves (hands, people, vehicles): COLMAP extracts
+    /// features only where a mask is 255 (white), so the poses come from the static scene.
+    /// The project's object-ID maps (255 = background, `segment`'s output) are such masks.
+    /// Matched to the frames by file name, else in file-name order (then one per frame);
+    /// resized to the frames (nearest).
+    #[arg(long, value_name = "DIR")]
+    masks: Option<PathBuf>,
     /// Hold out every N-th frame (frame k with k % N == 0) for evaluation; 0 = none.
     #[arg(long, default_value_t = 8)]
     holdout: usize,
@@ -143,6 +150,8 @@ struct PrepareReport {
     single_camera: bool,
     /// Whether the intrinsics were given (--camera-params) and held fixed.
     intrinsics_given: bool,
+    /// The --masks folder, when features were restricted to the static scene.
+    masks: Option<String>,
     undistorted: bool,
     /// Pinhole intrinsics of the written images (first camera), in pixels.
     camera: BTreeMap<&'static str, f64>,
@@ -249,6 +258,10 @@ pub fn run(a: Args) -> Result<()> {
     }
 
     // 2. COLMAP.
+    let mask_dir = work.join("masks");
+    if let Some(m) = &a.masks {
+        write_colmap_masks(m, &frames, &frames_dir, &mask_dir)?;
+    }
     let threads = a
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
@@ -260,29 +273,31 @@ pub fn run(a: Args) -> Result<()> {
     let n = frames.len() as u64;
     let s = |p: &Path| p.to_string_lossy().into_owned();
     let t0 = Instant::now();
-    let fe_log = colmap_stage(
-        "features",
-        &logs,
-        n,
-        &[
-            "feature_extractor",
-            "--database_path",
-            &s(&db),
-            "--image_path",
-            &s(&frames_dir),
-            "--ImageReader.camera_model",
-            &camera_model,
-            "--ImageReader.single_camera",
-            if a.single_camera { "1" } else { "0" },
-            "--ImageReader.camera_params",
-            camera_params.as_deref().unwrap_or(""),
-            "--SiftExtraction.use_gpu",
-            "0",
-            "--SiftExtraction.num_threads",
-            &threads,
-        ],
-        "Processed file [",
-    )?;
+    let mut fe_args: Vec<String> = [
+        "feature_extractor",
+        "--database_path",
+        &s(&db),
+        "--image_path",
+        &s(&frames_dir),
+        "--ImageReader.camera_model",
+        &camera_model,
+        "--ImageReader.single_camera",
+        if a.single_camera { "1" } else { "0" },
+        "--SiftExtraction.use_gpu",
+        "0",
+        "--SiftExtraction.num_threads",
+        &threads,
+    ]
+    .map(String::from)
+    .to_vec();
+    if let Some(p) = &camera_params {
+        fe_args.extend(["--ImageReader.camera_params".into(), p.clone()]);
+    }
+    if a.masks.is_some() {
+        fe_args.extend(["--ImageReader.mask_path".into(), s(&mask_dir)]);
+    }
+    let fe_args: Vec<&str> = fe_args.iter().map(String::as_str).collect();
+    let fe_log = colmap_stage("features", &logs, n, &fe_args, "Processed file [")?;
     seconds.insert("colmap_features", t0.elapsed().as_secs_f64());
     let t0 = Instant::now();
     let mut match_args: Vec<String> = match a.matcher {
@@ -485,6 +500,7 @@ pub fn run(a: Args) -> Result<()> {
         camera_model: camera_model.clone(),
         single_camera: a.single_camera,
         intrinsics_given: camera_params.is_some(),
+        masks: a.masks.as_ref().map(|m| m.display().to_string()),
         undistorted: distorted,
         camera: BTreeMap::from([
             ("fx", cam0[0]),
@@ -722,6 +738,63 @@ fn extract_video(
         })
         .collect();
     Ok((frames, source))
+}
+
+/// `--masks`: one mask per frame, as COLMAP reads them (`<frame file>.png` in `out`, 0 = no
+/// features): 255 stays 255, every other value (an object) becomes 0.
+fn write_colmap_masks(
+    masks: &Path,
+    frames: &[Extracted],
+    frames_dir: &Path,
+    out: &Path,
+) -> Result<()> {
+    if !masks.is_dir() {
+        bail!("--masks {}: not a folder", masks.display());
+    }
+    let files = list_images(masks)?;
+    let by_stem: HashMap<String, &PathBuf> = files
+        .iter()
+        .map(|p| {
+            (
+                p.file_stem()
+                    .unwrap_or_default()
+                    .to_string_lossy()
+                    .into_owned(),
+                p,
+            )
+        })
+        .collect();
+    let chosen: Vec<&PathBuf> = if frames.iter().all(|f| by_stem.contains_key(&f.stem)) {
+        frames.iter().map(|f| by_stem[&f.stem]).collect()
+    } else if files.len() == frames.len() {
+        files.iter().collect()
+    } else {
+        bail!(
+            "--masks {}: {} mask images for {} frames, and their names do not match the \
+             frames' ({}…); give one mask per frame",
+            masks.display(),
+            files.len(),
+            frames.len(),
+            frames[0].stem
+        );
+    };
+    std::fs::create_dir_all(out)?;
+    frames.par_iter().zip(chosen).try_for_each(|(f, path)| {
+        let frame = frames_dir.join(format!("{}.png", f.stem));
+        let (w, h) = image::image_dimensions(&frame)
+            .with_context(|| format!("reading {}", frame.display()))?;
+        let m = scene::load_mask(path)
+            .with_context(|| format!("reading the mask {}", path.display()))?;
+        let keep = image::GrayImage::from_fn(w, h, |x, y| {
+            let mx = (u64::from(x) * u64::from(m.width) / u64::from(w)) as u32;
+            let my = (u64::from(y) * u64::from(m.height) / u64::from(h)) as u32;
+            let v = m.data[(my * m.width + mx) as usize];
+            image::Luma([if v == scene::MASK_BACKGROUND { 255 } else { 0 }])
+        });
+        let to = out.join(format!("{}.png.png", f.stem));
+        keep.save(&to)
+            .with_context(|| format!("writing {}", to.display()))
+    })
 }
 
 /// A folder of images → `frames/<stem>.png` (decoded, downscaled), times from their order.

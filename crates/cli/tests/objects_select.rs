@@ -98,10 +98,10 @@ fn render_and_export_select_objects_and_export_them_one_by_one() {
     ]);
     let loaded = train::checkpoint::load_model(&train::checkpoint::latest(&run).unwrap()).unwrap();
     let car = loaded
-        .objects
+        .objects()
         .iter()
         .find(|o| o.name == "white-suv")
-        .unwrap_or_else(|| panic!("no white-suv in {:?}", loaded.objects));
+        .unwrap_or_else(|| panic!("no white-suv in {:?}", loaded.objects()));
     let car_rows = loaded.column.iter().filter(|&&c| c == car.id).count();
     assert!(car_rows > 0, "the car has Gaussians");
     let dataset = train::run::RunInfo::load(&run).unwrap().dataset().unwrap();
@@ -191,7 +191,7 @@ fn render_and_export_select_objects_and_export_them_one_by_one() {
     semdynreg(&["export", s(&run), "--per-object", "--out", s(&dir)]);
     let mut sum = rows(&dir.join("background.ply"));
     let frames = dataset.train.len() + dataset.val.len() + dataset.test.len();
-    for o in &loaded.objects {
+    for o in loaded.objects() {
         let m = train::ply::read(&dir.join(format!("{}.ply", o.name))).unwrap();
         let n = loaded.column.iter().filter(|&&c| c == o.id).count();
         assert_eq!(m.len(), n, "{}", o.name);

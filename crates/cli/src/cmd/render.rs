@@ -9,7 +9,7 @@
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 use train::render::{EvalReport, Renderer};
-use train::{checkpoint, GaussianModel, TrainConfig};
+use train::{checkpoint, GaussianModel};
 
 /// PNGs of a split's cameras from a run's latest (or chosen) checkpoint.
 ///

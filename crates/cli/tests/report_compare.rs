@@ -381,3 +381,71 @@ fn compare_names_a_missing_render() {
         "{stderr}"
     );
 }
+
+/// A scene without ground truth (a real capture) whose maps `segment --track` made: the
+/// crops come from the held-out frames' tracked maps, resampled when `segment` ran at
+/// another size, with the same numbers as the ground truth's when the maps are the same.
+#[test]
+fn a_tracked_scene_without_ground_truth_scores_its_objects_crops() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_dir = tmp.path().join("scene");
+    let ds = tiny_scene(&scene_dir);
+    let (base, ours) = (tmp.path().join("base"), tmp.path().join("ours"));
+    write_renders(&ds, 0, 60, &base);
+    write_renders(&ds, 0, 15, &ours);
+    let renders = [("baseline", base.as_path()), ("semdynreg", ours.as_path())];
+    let truth = compare_renders(&tmp.path().join("truth"), &scene_dir, &renders).results;
+
+    // The ground truth becomes tracked maps at twice the size; masks/ and objects.json go.
+    let objects = scene::objects::ObjectsFile::load(&scene_dir.join("objects.json")).unwrap();
+    for f in ds.train.iter().chain(&ds.test) {
+        let m = scene::load_mask(&ds.gt_mask_path(f)).unwrap();
+        let big = image::GrayImage::from_fn(m.width * 2, m.height * 2, |x, y| {
+            image::Luma([m.data[((y / 2) * m.width + x / 2) as usize]])
+        });
+        let to = ds.semantics_path(f);
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        big.save(&to).unwrap();
+    }
+    let tracked: Vec<Value> = objects
+        .objects
+        .iter()
+        .map(|o| serde_json::json!({ "name": o.name }))
+        .collect();
+    let record = serde_json::json!({ "track": { "objects": tracked } });
+    std::fs::write(
+        scene_dir.join("semantics/semantics.json"),
+        record.to_string(),
+    )
+    .unwrap();
+    std::fs::remove_dir_all(scene_dir.join("masks")).unwrap();
+    std::fs::remove_file(scene_dir.join("objects.json")).unwrap();
+
+    let c = compare_renders(&tmp.path().join("tracked"), &scene_dir, &renders);
+    let r = &c.results;
+    assert!(
+        get(r, "protocol.crop_policy")
+            .as_str()
+            .unwrap()
+            .starts_with("tracked object-ID map"),
+        "{}",
+        get(r, "protocol.crop_policy")
+    );
+    let moving = get(r, "protocol.moving_objects").as_array().unwrap();
+    assert_eq!(
+        moving.len(),
+        objects.objects.len(),
+        "every tracked object is scored"
+    );
+    let mover = &objects.objects[0].name;
+    for method in ["baseline", "semdynreg"] {
+        let key = format!("{method}.moving_object_crops");
+        let (ours, theirs) = (
+            &get(r, &key)[mover.as_str()],
+            &get(&truth, &key)[mover.as_str()],
+        );
+        assert!(ours.is_object(), "{method}: no crop series for {mover}");
+        assert_eq!(ours, theirs, "{method}: tracked crops of {mover} differ");
+    }
+    check_links(&c);
+}

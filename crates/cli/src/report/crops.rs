@@ -53,9 +53,10 @@ impl Default for CropPolicy {
 }
 
 impl CropPolicy {
-    pub fn describe(&self) -> String {
+    /// The rule in words, `masks` naming where the masks come from.
+    pub fn describe(&self, masks: &str) -> String {
         format!(
-            "ground-truth mask box padded by max({} px, {}% of its longer side) per side, \
+            "{masks} box padded by max({} px, {}% of its longer side) per side, \
              clamped to the image, grown to ≥ {} px per side; objects with < {} mask pixels \
              are not scored",
             self.min_pad_px,

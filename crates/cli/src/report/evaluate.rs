@@ -20,7 +20,8 @@ pub struct EvalFrame {
     pub file_path: String,
     pub time: f32,
     pub gt: RgbImage,
-    /// Ground-truth instance mask (`H·W`, 255 = background), when the scene has one.
+    /// Instance mask (`H·W`, 255 = background) for the object crops: the ground truth
+    /// when the scene has one, else a tracked object-ID map (see [`EvalSet::masks`]).
     pub mask: Option<Vec<u8>>,
 }
 
@@ -39,6 +40,31 @@ pub struct EvalSet {
     pub duration_s: f32,
     pub t_seconds: Vec<u32>,
     pub policy: CropPolicy,
+    /// Where the frames' masks come from.
+    pub masks: MaskSource,
+}
+
+/// Where the object crops' masks come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MaskSource {
+    /// `masks/` and `objects.json` (generated scenes).
+    GroundTruth,
+    /// The held-out frames' tracked object-ID maps (`segment --track`): a real capture
+    /// has no ground truth, so the crops are as good as the tracking.
+    Tracked,
+    /// Neither: no object crops.
+    Absent,
+}
+
+impl MaskSource {
+    /// The masks' name in the protocol's crop description.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::GroundTruth => "ground-truth mask",
+            Self::Tracked => "tracked object-ID map (segment --track, no ground truth)",
+            Self::Absent => "mask (none available)",
+        }
+    }
 }
 
 impl EvalSet {
@@ -287,6 +313,7 @@ mod tests {
                 min_pixels: 4,
                 min_side: 1,
             },
+            masks: MaskSource::GroundTruth,
         }
     }
 

@@ -1,9 +1,10 @@
 //! Loads what the evaluation needs from a scene folder: the test frames (composited over
-//! the background the runs trained with), their ground-truth masks, the objects of
-//! `objects.json`, and the object-ID maps the figure shows.
+//! the background the runs trained with), their masks and objects (the ground truth's
+//! `masks/` and `objects.json`, else the tracked object-ID maps of `segment --track`), and
+//! the object-ID maps the figure shows.
 
 use super::crops::CropPolicy;
-use super::evaluate::{EvalFrame, EvalSet, ObjectSpec};
+use super::evaluate::{EvalFrame, EvalSet, MaskSource, ObjectSpec};
 use super::images::from_rgb_bytes;
 use anyhow::{ensure, Context, Result};
 use scene::objects::ObjectsFile;
@@ -73,13 +74,64 @@ pub fn eval_set(ds: &Dataset, duration_s: f32, policy: CropPolicy) -> Result<Eva
             mask: optional_mask(&ds.gt_mask_path(f), f)?,
         });
     }
+    let mut objects = load_objects(&ds.root)?;
+    let mut masks = if frames.iter().any(|f| f.mask.is_some()) {
+        MaskSource::GroundTruth
+    } else {
+        MaskSource::Absent
+    };
+    if masks == MaskSource::Absent && objects.is_empty() {
+        if let Some(tracked) = tracked_objects(ds) {
+            for (frame, f) in frames.iter_mut().zip(split) {
+                frame.mask = semantic_map(ds, f)?;
+            }
+            objects = tracked;
+            masks = MaskSource::Tracked;
+        }
+    }
     Ok(EvalSet {
         frames,
-        objects: load_objects(&ds.root)?,
+        objects,
         duration_s,
         t_seconds: PAPER_SECONDS.to_vec(),
         policy,
+        masks,
     })
+}
+
+/// The objects `segment --track` followed (`semantics/semantics.json`'s `track` section),
+/// or `None` when the scene's maps were not tracked: per-frame SAM + CLIP labels change
+/// from frame to frame, so they do not make a crop. Tracked objects are the ones the user
+/// pointed at, so each counts as moving (each gets its crop series).
+fn tracked_objects(ds: &Dataset) -> Option<Vec<ObjectSpec>> {
+    let record = ds.root.join("semantics").join("semantics.json");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(record).ok()?).ok()?;
+    v["track"]["objects"].as_array()?;
+    let objects: Vec<ObjectSpec> = train::id_maps::names(ds)
+        .into_iter()
+        .map(|(id, name)| ObjectSpec {
+            id,
+            name,
+            moving: true,
+        })
+        .collect();
+    (!objects.is_empty()).then_some(objects)
+}
+
+/// The frame's object-ID map (`semantics/`) resampled (nearest) to the frame's size:
+/// `segment` ran at the scene's full size, the evaluation may be downscaled. `None` if it
+/// is missing; an unreadable one is an error naming it.
+fn semantic_map(ds: &Dataset, f: &Frame) -> Result<Option<Vec<u8>>> {
+    let path = ds.semantics_path(f);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let m = load_mask(&path)
+        .with_context(|| format!("reading the object-ID map {}", path.display()))?;
+    let (w, h) = (f.image.width, f.image.height);
+    Ok(Some(train::id_maps::resample_nearest(
+        &m.data, m.width, m.height, w, h,
+    )))
 }
 
 /// The object-ID map shown for each picked frame: the cached SAM + CLIP map
@@ -95,7 +147,7 @@ pub fn figure_id_maps(ds: &Dataset, set: &EvalSet) -> Result<(Vec<Option<Vec<u8>
     let mut semantic = Vec::with_capacity(picked.len());
     for &i in &picked {
         let f = &split[i];
-        semantic.push(optional_mask(&ds.semantics_path(f), f)?);
+        semantic.push(semantic_map(ds, f)?);
     }
     if semantic.iter().all(Option::is_some) {
         return Ok((

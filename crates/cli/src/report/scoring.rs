@@ -83,7 +83,7 @@ impl Scoring {
             .into(),
             duration_s,
             t_seconds: set.t_seconds.clone(),
-            crop_policy: self.policy.describe(),
+            crop_policy: self.policy.describe(set.masks.label()),
             ssim_variant: MetricsScorer::ssim_description().into(),
             lpips: self.lpips_text.clone(),
             moving_object: set

@@ -40,6 +40,11 @@ pub struct ObjectsConfig {
     /// this factor of 1. A camera moving along the object's path cannot otherwise tell a
     /// moving object from a static one at another depth (docs/objects.md).
     pub static_ring_tolerance: f32,
+    /// A moving object whose tracked rigid render covers its masks with a median IoU below
+    /// this (over its views, alpha > ½ against the mask) is not a rigid body (a hand, a
+    /// person): it is left to the deformation field, with a warning saying so. 0 keeps
+    /// every object rigid.
+    pub min_rigid_iou: f32,
     /// Tracking (time-progressive fitting): iterations of pose fitting per new frame, and of
     /// shape/appearance refinement on already tracked frames after each new frame.
     pub track_pose_iters: u32,
@@ -95,6 +100,7 @@ impl Default for ObjectsConfig {
             static_motion: 0.25,
             static_angle_deg: 10.0,
             static_ring_tolerance: 1.6,
+            min_rigid_iou: 0.0,
             track_pose_iters: 30,
             track_shape_iters: 10,
             track_refine_iters: 1000,
@@ -144,6 +150,12 @@ impl ObjectsConfig {
             return Err(format!(
                 "objects.static_ring_tolerance must be finite and > 1, got {}",
                 self.static_ring_tolerance
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.min_rigid_iou) {
+            return Err(format!(
+                "objects.min_rigid_iou must be in [0, 1], got {}",
+                self.min_rigid_iou
             ));
         }
         for (name, v) in positive {

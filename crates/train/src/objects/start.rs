@@ -27,6 +27,11 @@ pub struct StartReport {
     pub gaussians: usize,
     /// The gauge applied to the lifted guess of its size and distance.
     pub scale: f32,
+    /// Median IoU of its rigid render with its masks (`Tracker::mask_iou`).
+    pub mask_iou: f32,
+    /// Not a rigid body by `objects.min_rigid_iou`: left to the deformation field (no
+    /// Gaussians, no trajectory of its own).
+    pub left_to_field: bool,
 }
 
 /// The static background's camera depth in every training view (δ = 0: the background
@@ -165,11 +170,19 @@ pub fn start(
     for (f, (id, seen)) in done.into_iter().zip(&ids) {
         let id = *id;
         let name = node.name_of(id);
-        state.append_object(&f.model, id);
         let size = median(seen.iter().map(|s| s.size).collect()) * f.scale;
-        tracing::info!(object = %name, sightings = seen.len(), is_static = f.is_static,
-            residual_motion = f.residual_motion, size, scale = f.scale,
-            gaussians = f.model.len(), "object started");
+        let left_to_field = !f.is_static && f.mask_iou < node.cfg.min_rigid_iou;
+        if left_to_field {
+            tracing::warn!(object = %name, mask_iou = f.mask_iou,
+                min_rigid_iou = node.cfg.min_rigid_iou,
+                "not a rigid body: one rigid shape covers its masks with a median IoU below \
+                 objects.min_rigid_iou, so the deformation field keeps it");
+        } else {
+            state.append_object(&f.model, id);
+            tracing::info!(object = %name, sightings = seen.len(), is_static = f.is_static,
+                residual_motion = f.residual_motion, size, scale = f.scale,
+                mask_iou = f.mask_iou, gaussians = f.model.len(), "object started");
+        }
         reports.push(StartReport {
             id,
             name: name.clone(),
@@ -177,9 +190,14 @@ pub fn start(
             is_static: f.is_static,
             residual_motion: f.residual_motion,
             size,
-            gaussians: f.model.len(),
+            gaussians: if left_to_field { 0 } else { f.model.len() },
             scale: f.scale,
+            mask_iou: f.mask_iou,
+            left_to_field,
         });
+        if left_to_field {
+            continue;
+        }
         node.knot_adam.push(KnotAdam::zeros(f.trajectory.len()));
         node.objects
             .push(RigidObject::new(id, name, f.trajectory, f.is_static));

@@ -473,21 +473,70 @@ impl<'a> Tracker<'a> {
         Ok(sum / self.views.len().max(1) as f32)
     }
 
+    /// Median over the views of the IoU between the object's render alone (alpha > ½) and
+    /// its mask: how well one rigid shape under the tracked poses explains the masks. A
+    /// body that bends (a hand) leaves part of its masks uncovered, or spills around them,
+    /// in the views where its shape differs from the fitted one.
+    pub fn mask_iou(&mut self) -> Result<f32, splat::SplatError> {
+        let mut ious = Vec::with_capacity(self.views.len());
+        for v in 0..self.views.len() {
+            let view = &self.views[v];
+            deform::apply(&self.model, None, &mut self.deformed);
+            let mut poses = Vec::new();
+            place::place(
+                std::slice::from_ref(&self.object),
+                &self.rows,
+                &self.model,
+                view.time,
+                &mut self.deformed,
+                &mut poses,
+            );
+            let g = crate::deform::gaussians(&self.model, &self.deformed);
+            let out = self
+                .raster
+                .forward(&g, view.cam, &RenderOptions::default())?;
+            ious.push(iou(out.alpha, view.id_map, self.object.id));
+        }
+        if ious.is_empty() {
+            return Ok(1.0);
+        }
+        let mid = ious.len() / 2;
+        ious.select_nth_unstable_by(mid, f32::total_cmp);
+        Ok(ious[mid])
+    }
+
     pub fn is_static(&self) -> bool {
         self.object.is_static
     }
 
-    pub fn finish(self) -> Tracked {
+    pub fn finish(mut self) -> Result<Tracked, splat::SplatError> {
+        let mask_iou = self.mask_iou()?;
         let o = self.object;
-        tracing::info!(object = %o.name, views = self.views.len(), is_static = o.is_static, scale = self.scale, "tracked");
-        Tracked {
+        tracing::info!(object = %o.name, views = self.views.len(), is_static = o.is_static, scale = self.scale, mask_iou, "tracked");
+        Ok(Tracked {
             id: o.id,
             model: self.model,
             is_static: o.is_static,
             trajectory: o.trajectory,
             scale: self.scale,
             residual_motion: self.residual_motion,
-        }
+            mask_iou,
+        })
+    }
+}
+
+/// IoU of `alpha > ½` with the pixels of `id` in `id_map` (1 when both are empty).
+fn iou(alpha: &[f32], id_map: &[u8], id: u8) -> f32 {
+    let (mut both, mut either) = (0u32, 0u32);
+    for (&a, &m) in alpha.iter().zip(id_map) {
+        let (r, k) = (a > 0.5, m == id);
+        both += u32::from(r && k);
+        either += u32::from(r || k);
+    }
+    if either == 0 {
+        1.0
+    } else {
+        both as f32 / either as f32
     }
 }
 
@@ -512,7 +561,7 @@ pub fn fit(
         if i == 0 {
             if let Some(s) = t.still_scale() {
                 t.hold_still(s);
-                return Ok(t.finish());
+                return t.finish();
             }
         }
         let loss = t.mean_loss()?;
@@ -531,7 +580,7 @@ pub fn fit(
         t.ring_gauge();
     }
     t.settle_contact(1.0, rng)?;
-    Ok(t.finish())
+    t.finish()
 }
 
 /// What [`fit`] found.
@@ -546,6 +595,8 @@ pub struct Tracked {
     pub scale: f32,
     /// RMS motion of its origin under the least-motion gauge (world units).
     pub residual_motion: f32,
+    /// How well the rigid fit covers its masks ([`Tracker::mask_iou`]).
+    pub mask_iou: f32,
 }
 
 /// Largest side of the bounding box of `N·3` points.
@@ -571,4 +622,24 @@ pub fn centroid(means: &[f32]) -> [f32; 3] {
         }
     }
     s.map(|v| (v / n) as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::iou;
+
+    #[test]
+    fn iou_counts_covered_missed_and_spilled_pixels() {
+        // Mask: pixels 0..4 are object 2; the render covers 2..6 (two hits, two misses,
+        // two spills) and ignores alpha at exactly ½.
+        let map = [2, 2, 2, 2, 255, 255, 7, 255];
+        let alpha = [0.0, 0.5, 0.9, 0.6, 0.7, 0.8, 0.0, 0.0];
+        assert!((iou(&alpha, &map, 2) - 2.0 / 6.0).abs() < 1e-6);
+        assert_eq!(
+            iou(&[0.0; 8], &[255; 8], 2),
+            1.0,
+            "nothing to cover, nothing drawn"
+        );
+        assert_eq!(iou(&[1.0; 8], &[255; 8], 2), 0.0, "all spill");
+    }
 }

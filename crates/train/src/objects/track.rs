@@ -14,7 +14,7 @@ use super::gauge;
 use super::knots::KnotAdam;
 use super::lift::{self, DepthMap};
 use super::place::{self, NO_OBJECT};
-use super::trajectory::{Trajectory, TrajectoryGrad};
+use super::trajectory::{Pose, Trajectory, TrajectoryGrad};
 use super::{ObjectsConfig, RigidObject};
 use crate::adam::{Adam, AdamHyper};
 use crate::deform::{self, CanonicalGrads, Deformed};
@@ -105,20 +105,27 @@ const HP: AdamHyper = AdamHyper {
 };
 
 impl<'a> Tracker<'a> {
-    /// One forward/backward on view `v`; steps the view's knot and/or the Gaussians.
-    fn step(&mut self, v: usize, pose: bool, shape: bool) -> Result<f32, splat::SplatError> {
-        let view = &self.views[v];
+    /// The object's Gaussians placed in the world at `time` (into `self.deformed`), and
+    /// the pose used, for the backward.
+    fn place_at(&mut self, time: f32) -> Vec<Pose> {
         deform::apply(&self.model, None, &mut self.deformed);
-        let objects = std::slice::from_ref(&self.object);
         let mut poses = Vec::new();
         place::place(
-            objects,
+            std::slice::from_ref(&self.object),
             &self.rows,
             &self.model,
-            view.time,
+            time,
             &mut self.deformed,
             &mut poses,
         );
+        poses
+    }
+
+    /// One forward/backward on view `v`; steps the view's knot and/or the Gaussians.
+    fn step(&mut self, v: usize, pose: bool, shape: bool) -> Result<f32, splat::SplatError> {
+        let view = &self.views[v];
+        let poses = self.place_at(view.time);
+        let objects = std::slice::from_ref(&self.object);
         let g = crate::deform::gaussians(&self.model, &self.deformed);
         let opts = RenderOptions::default();
         let out = self.raster.forward(&g, view.cam, &opts)?;
@@ -481,16 +488,7 @@ impl<'a> Tracker<'a> {
         let mut ious = Vec::with_capacity(self.views.len());
         for v in 0..self.views.len() {
             let view = &self.views[v];
-            deform::apply(&self.model, None, &mut self.deformed);
-            let mut poses = Vec::new();
-            place::place(
-                std::slice::from_ref(&self.object),
-                &self.rows,
-                &self.model,
-                view.time,
-                &mut self.deformed,
-                &mut poses,
-            );
+            self.place_at(view.time);
             let g = crate::deform::gaussians(&self.model, &self.deformed);
             let out = self
                 .raster

@@ -2,6 +2,7 @@
 //! clap `Args` and a `run` function; this file only dispatches.
 
 mod cmd;
+mod npz;
 mod report;
 mod sweep;
 mod view;
@@ -54,6 +55,7 @@ fn main() -> anyhow::Result<()> {
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
+    check_simd_env()?;
     match cli.command {
         // DISPATCH (one arm each)
         Command::Compare(a) => cmd::compare::run(a),
@@ -72,4 +74,20 @@ fn main() -> anyhow::Result<()> {
         Command::Weights(a) => cmd::weights::run(a),
         Command::RenderCase(a) => cmd::render_case::run(a),
     }
+}
+
+/// Refuses a misspelt `SEMDYNREG_SIMD` (the kernels would silently ignore it) and logs the
+/// vector level the kernels use.
+fn check_simd_env() -> anyhow::Result<()> {
+    let cap = simd::env_cap()?;
+    let (cpu, used) = (simd::cpu_level(), simd::level());
+    match cap {
+        Some(c) if c > cpu => tracing::warn!(
+            "{}={c}: this CPU has only {cpu}; the kernels use {used}",
+            simd::ENV
+        ),
+        Some(_) => tracing::info!("vector kernels: {used} (CPU: {cpu}; set by {})", simd::ENV),
+        None => tracing::debug!("vector kernels: {used}"),
+    }
+    Ok(())
 }

@@ -1,5 +1,6 @@
-//! `semdynreg render-case`: a reference case round trip, and bad input giving a clear error
-//! that names the file and the key (never a panic).
+//! `semdynreg render-case`: a reference case round trip, bad input giving a clear error
+//! that names the file and the key (never a panic), and `SEMDYNREG_SIMD`: every vector
+//! level gives the same bytes, a misspelt level stops the binary before any work.
 
 use npyz::npz::{NpzArchive, NpzWriter};
 use npyz::WriterBuilder;
@@ -64,13 +65,26 @@ fn write_all(path: &Path, arrays: &Arrays) {
 }
 
 fn render_case(input: &Path, output: &Path, extra: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_semdynreg"))
-        .arg("render-case")
+    render_case_simd(input, output, extra, None)
+}
+
+/// `render-case` with `SEMDYNREG_SIMD` set to `simd` (unset when `None`).
+fn render_case_simd(
+    input: &Path,
+    output: &Path,
+    extra: &[&str],
+    simd: Option<&str>,
+) -> std::process::Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_semdynreg"));
+    c.arg("render-case")
         .arg(input)
         .arg(output)
         .args(extra)
-        .output()
-        .expect("run semdynreg")
+        .env_remove("SEMDYNREG_SIMD");
+    if let Some(v) = simd {
+        c.env("SEMDYNREG_SIMD", v);
+    }
+    c.output().expect("run semdynreg")
 }
 
 fn get<'a>(arrays: &'a Arrays, key: &str) -> &'a (String, Vec<u64>, Vec<f64>) {
@@ -176,4 +190,57 @@ fn not_an_npz_is_named() {
     let run = render_case(&input, &dir.path().join("o.npz"), &[]);
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(!run.status.success() && err.contains("junk.npz"), "{err}");
+}
+
+/// Forward and backward under each cap (the CPU's own limit applies, so on an AVX2 machine
+/// `avx512` runs AVX2): every array but the timings is the same, bit for bit.
+#[test]
+fn every_simd_level_gives_the_same_arrays() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = case("01_tiny_sh3_offcentre_behind");
+    let mut runs = Vec::new();
+    for cap in [None, Some("portable"), Some("AVX2"), Some("avx512")] {
+        let out = dir.path().join(format!("{}.npz", cap.unwrap_or("default")));
+        let run = render_case_simd(&input, &out, &["--topk", "3"], cap);
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(run.status.success(), "{cap:?}: {err}");
+        let mut arrays = read_all(&out);
+        arrays.retain(|a| !a.0.starts_with("seconds_"));
+        // The archive lists its entries in no set order.
+        arrays.sort_by(|a, b| a.0.cmp(&b.0));
+        runs.push((cap, arrays));
+    }
+    let (_, want) = &runs[0];
+    assert!(want.iter().any(|a| a.0 == "grad_means"));
+    for (cap, got) in &runs[1..] {
+        assert_eq!(got.len(), want.len(), "{cap:?}");
+        for (g, w) in got.iter().zip(want) {
+            let same = g.0 == w.0
+                && g.1 == w.1
+                && g.2
+                    .iter()
+                    .zip(&w.2)
+                    .all(|(a, b)| a.to_bits() == b.to_bits());
+            assert!(same, "SEMDYNREG_SIMD={cap:?} changed `{}`", g.0);
+        }
+    }
+}
+
+#[test]
+fn a_misspelt_simd_level_is_refused_before_any_work() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("out.npz");
+    let run = render_case_simd(
+        &case("01_tiny_sh3_offcentre_behind"),
+        &out,
+        &[],
+        Some("avx-512"),
+    );
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "accepted SEMDYNREG_SIMD=avx-512");
+    assert!(
+        err.contains("SEMDYNREG_SIMD") && err.contains("avx-512") && !err.contains("panicked"),
+        "{err}"
+    );
+    assert!(!out.exists());
 }

@@ -7,7 +7,7 @@
 //! Filters are written as FIRs over fixed chunks of `LANES` outputs with every tap added into
 //! `LANES` independent accumulators, which LLVM turns into packed SIMD; each kernel entry
 //! point is compiled twice, for the baseline target and with AVX2 enabled (no FMA: results must not depend on the CPU), and picked
-//! at run time (`is_x86_feature_detected!`), so no `-C target-cpu` is needed.
+//! at run time (`simd::level`, capped by `SEMDYNREG_SIMD`), so no `-C target-cpu` is needed.
 
 use super::{map_terms, BWD, CH, FWD, RADIUS, TAPS};
 
@@ -217,8 +217,8 @@ pub(super) fn band_forward(
     hseeds: Option<&mut [f32]>,
 ) -> f64 {
     #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
+    if simd::level() >= simd::Simd::Avx2 {
+        // SAFETY: `simd::level` only returns levels this CPU supports.
         return unsafe { band_forward_avx2(f, r0, nrows, scratch, hseeds) };
     }
     band_forward_body(f, r0, nrows, scratch, hseeds)
@@ -239,8 +239,8 @@ unsafe fn band_forward_avx2(
 /// Gradient rows `r0..` (`g` holds whole rows), on the best instruction set available.
 pub(super) fn band_grad(f: &Frame, hseeds: &[f32], r0: usize, g: &mut [f32], scratch: &mut [f32]) {
     #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
+    if simd::level() >= simd::Simd::Avx2 {
+        // SAFETY: `simd::level` only returns levels this CPU supports.
         return unsafe { band_grad_avx2(f, hseeds, r0, g, scratch) };
     }
     band_grad_body(f, hseeds, r0, g, scratch)

@@ -35,6 +35,7 @@ mod validate;
 pub use camera::Camera;
 pub use error::SplatError;
 pub use raster::{simd_level, Rasterizer, Simd, Timings};
+pub use simd::cpu_level as cpu_simd_level;
 
 /// Side of a square tile in pixels.
 pub const TILE_SIZE: u32 = 16;

@@ -325,7 +325,6 @@ pub(crate) fn project_vjp_all(
 mod tests {
     use super::*;
     use crate::project::{project, project_vjp, GaussGradMut};
-    use crate::raster::simd_level;
     use crate::{Camera, RenderOptions};
 
     /// Gaussians around and behind a camera at the origin looking down +z: some behind the
@@ -389,7 +388,7 @@ mod tests {
     fn levels() -> Vec<Simd> {
         [Simd::Portable, Simd::Avx2, Simd::Avx512]
             .into_iter()
-            .filter(|&s| s <= simd_level())
+            .filter(|&s| s <= simd::cpu_level())
             .collect()
     }
 

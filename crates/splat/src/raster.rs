@@ -12,6 +12,7 @@ use crate::{
     Camera, Colors, ForwardOutput, Gaussians, Gradients, RasterStats, RenderOptions, SplatError,
 };
 use rayon::prelude::*;
+pub use simd::Simd;
 use std::time::Instant;
 
 /// Wall-clock seconds of the phases of the last [`Rasterizer::forward`] or
@@ -59,30 +60,10 @@ pub struct Rasterizer {
     scalar_projection: bool,
 }
 
-/// Widest vector level the tile kernels may use on this CPU (detected at run time, so
-/// one build runs everywhere).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub enum Simd {
-    Portable,
-    /// AVX2 + FMA: a 16-pixel row is two 8-lane vectors.
-    Avx2,
-    /// AVX-512F (+ AVX2/FMA): a row is one 16-lane vector.
-    Avx512,
-}
-
-/// The widest level this CPU supports.
+/// The level the tile kernels use by default: the CPU's, capped by `SEMDYNREG_SIMD`
+/// (the `simd` crate).
 pub fn simd_level() -> Simd {
-    #[cfg(target_arch = "x86_64")]
-    {
-        let avx2 = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
-        if avx2 && is_x86_feature_detected!("avx512f") {
-            return Simd::Avx512;
-        }
-        if avx2 {
-            return Simd::Avx2;
-        }
-    }
-    Simd::Portable
+    simd::level()
 }
 
 impl Rasterizer {
@@ -108,8 +89,9 @@ impl Rasterizer {
         self.count_alpha = on;
     }
 
-    /// Caps the tile kernels' vector level (for A/B timings and the test that all levels
-    /// give bit-identical results); the CPU's own limit still applies.
+    /// Sets the tile kernels' vector level (for A/B timings and the test that all levels
+    /// give bit-identical results), in place of `SEMDYNREG_SIMD`; the CPU's own limit still
+    /// applies.
     pub fn set_simd_cap(&mut self, cap: Simd) {
         self.simd_cap = Some(cap);
     }
@@ -123,8 +105,10 @@ impl Rasterizer {
 
     /// The vector level the tile kernels use.
     pub fn simd(&self) -> Simd {
-        let detected = simd_level();
-        self.simd_cap.map_or(detected, |c| c.min(detected))
+        match self.simd_cap {
+            Some(cap) => simd::capped(simd::cpu_level(), Some(cap)),
+            None => simd_level(),
+        }
     }
 
     /// Phase timings of the last forward or backward call.

@@ -6,7 +6,7 @@
 //!
 //! ```text
 //! SEMDYNREG_BENCH_RUN=RUN [SEMDYNREG_BENCH_ITERATION=N] [SEMDYNREG_BENCH_STEPS=20] \
-//!     [SEMDYNREG_BENCH_AB=projection|field] cargo bench -p train --bench trained_state
+//!     [SEMDYNREG_BENCH_AB=projection|field|simd] cargo bench -p train --bench trained_state
 //! ```
 //!
 //! `SEMDYNREG_BENCH_AB` makes the steps alternate between a reference path and the fast one,
@@ -14,7 +14,10 @@
 //! - `projection`: the rasterizer's scalar projection (one Gaussian at a time) against its
 //!   16-lane one;
 //! - `field`: the field's time features written into every row of the MLP's input (as
-//!   Deformable-3DGS does) against folded once into its biases.
+//!   Deformable-3DGS does) against folded once into its biases;
+//! - `simd`: the rasterizer's kernels at every vector level this CPU has (portable, AVX2,
+//!   AVX-512), so one machine measures the paths users' CPUs take. The field's GEMMs keep
+//!   gemm's own dispatch.
 //!
 //! RUN is a run folder (`semdynreg train … --out RUN`); its latest checkpoint is used unless
 //! an iteration is named. Without `SEMDYNREG_BENCH_RUN` it says what it needs and exits:
@@ -89,12 +92,17 @@ fn main() {
         tr.step().expect("warm-up step");
     }
     let ab = std::env::var("SEMDYNREG_BENCH_AB").ok();
-    let variants: &[&str] = match ab.as_deref() {
-        None => &["median"],
-        Some("projection") => &["scalar projection", "16-lane projection"],
-        Some("field") => &["time per row", "time in the bias"],
+    let levels: Vec<splat::Simd> = splat::Simd::ALL
+        .into_iter()
+        .filter(|&l| l <= splat::cpu_simd_level())
+        .collect();
+    let variants: Vec<&str> = match ab.as_deref() {
+        None => vec!["median"],
+        Some("projection") => vec!["scalar projection", "16-lane projection"],
+        Some("field") => vec!["time per row", "time in the bias"],
+        Some("simd") => levels.iter().map(|l| l.name()).collect(),
         Some(other) => {
-            panic!("SEMDYNREG_BENCH_AB={other}: the A/B switches are `projection`, `field`")
+            panic!("SEMDYNREG_BENCH_AB={other}: the A/B switches are `projection`, `field`, `simd`")
         }
     };
     let mut samples: Vec<Samples> = variants.iter().map(|_| Samples::new()).collect();
@@ -103,6 +111,7 @@ fn main() {
         match ab.as_deref() {
             Some("projection") => tr.rasterizer_mut().set_scalar_projection(v == 0),
             Some("field") => field_mut(&mut tr).set_time_per_row(v == 0),
+            Some("simd") => tr.rasterizer_mut().set_simd_cap(levels[v]),
             _ => {}
         }
         samples[v].take(&mut tr);

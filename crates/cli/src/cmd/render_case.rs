@@ -4,12 +4,9 @@
 //! gradient (named as FORMAT.md), optional top-k and the median timings, so that anyone
 //! can compare our rasterizer with another implementation.
 
+use crate::npz::{NpzReader, NpzWriter};
 use anyhow::{bail, ensure, Context, Result};
-use npyz::npz::{NpzArchive, NpzWriter};
-use npyz::WriterBuilder;
 use splat::{Camera, Colors, Gaussians, Gradients, Rasterizer, RenderOptions};
-use std::fs::File;
-use std::io::{BufReader, BufWriter};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -64,13 +61,13 @@ impl Case {
 
 /// Reads arrays of an `.npz` as f64 with shape and finiteness checks naming file and key.
 struct Reader {
-    npz: NpzArchive<BufReader<File>>,
+    npz: NpzReader,
     path: PathBuf,
 }
 
 impl Reader {
     fn open(path: &Path) -> Result<Self> {
-        let npz = NpzArchive::open(path)
+        let npz = NpzReader::open(path)
             .with_context(|| format!("{}: cannot open as .npz", path.display()))?;
         Ok(Reader {
             npz,
@@ -321,38 +318,17 @@ fn render(case: &Case, topk: usize, repeat: u32) -> Result<Results> {
     Ok(res)
 }
 
-fn put(
-    npz: &mut NpzWriter<BufWriter<File>>,
-    key: &str,
-    shape: &[usize],
-    data: &[f64],
-) -> Result<()> {
-    let shape: Vec<u64> = shape.iter().map(|&d| d as u64).collect();
-    let mut w = npz
-        .array::<f64>(key, Default::default())?
-        .default_dtype()
-        .shape(&shape)
-        .begin_nd()?;
-    w.extend(data.iter().copied())?;
-    w.finish()?;
-    Ok(())
+fn put(npz: &mut NpzWriter, key: &str, shape: &[usize], data: &[f64]) -> Result<()> {
+    Ok(npz.put(key, shape, data.iter().copied())?)
 }
 
 fn put_int<T: npyz::AutoSerialize + Copy>(
-    npz: &mut NpzWriter<BufWriter<File>>,
+    npz: &mut NpzWriter,
     key: &str,
     shape: &[usize],
     data: &[T],
 ) -> Result<()> {
-    let shape: Vec<u64> = shape.iter().map(|&d| d as u64).collect();
-    let mut w = npz
-        .array::<T>(key, Default::default())?
-        .default_dtype()
-        .shape(&shape)
-        .begin_nd()?;
-    w.extend(data.iter().copied())?;
-    w.finish()?;
-    Ok(())
+    Ok(npz.put(key, shape, data.iter().copied())?)
 }
 
 fn write_results(path: &Path, case: &Case, topk: usize, r: &Results) -> Result<()> {
@@ -399,7 +375,7 @@ fn write_results(path: &Path, case: &Case, topk: usize, r: &Results) -> Result<(
     }
     put(&mut npz, "seconds_forward", &[], &[r.seconds_forward])?;
     put(&mut npz, "seconds_backward", &[], &[r.seconds_backward])?;
-    npz.zip_writer().finish()?;
+    npz.finish()?;
     Ok(())
 }
 

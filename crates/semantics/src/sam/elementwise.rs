@@ -1,6 +1,6 @@
 //! Element-wise kernels of the SAM mask decoder (LayerNorm, softmax, GELU, ReLU, additions),
 //! compiled several times and picked at run time for the widest SIMD the CPU has (AVX-512F,
-//! else AVX2+FMA, else the portable baseline). The code of each kernel is written once, as plain
+//! else AVX2+FMA, else the portable baseline; `simd::level`, capped by `SEMDYNREG_SIMD`). The code of each kernel is written once, as plain
 //! loops the compiler auto-vectorizes: no float reductions in sequential order (they would pin
 //! the loop to scalar adds; sums use 16 independent accumulators instead), no integer ops that
 //! carry overflow checks in test builds (the exp bit-trick uses wrapping arithmetic).
@@ -28,15 +28,12 @@ macro_rules! dispatch {
                 fn avx2($($arg: $ty),*) {
                     generic($($arg),*)
                 }
-                if std::arch::is_x86_feature_detected!("avx512f") {
-                    // SAFETY: the CPU has AVX-512F (checked on the line above).
-                    return unsafe { avx512($($arg),*) };
-                }
-                if std::arch::is_x86_feature_detected!("avx2")
-                    && std::arch::is_x86_feature_detected!("fma")
-                {
-                    // SAFETY: the CPU has AVX2 and FMA (checked above).
-                    return unsafe { avx2($($arg),*) };
+                match simd::level() {
+                    // SAFETY: `simd::level` only returns levels this CPU supports.
+                    simd::Simd::Avx512 => return unsafe { avx512($($arg),*) },
+                    // SAFETY: as above (AVX2 and FMA).
+                    simd::Simd::Avx2 => return unsafe { avx2($($arg),*) },
+                    simd::Simd::Portable => {}
                 }
             }
             generic($($arg),*)

@@ -34,6 +34,7 @@ pub mod model;
 pub mod node;
 pub mod nodes;
 pub mod objects;
+pub mod objects_bench;
 pub mod ply;
 pub mod quat;
 pub mod regularizer;

@@ -14,6 +14,7 @@
 //! `cargo test --release -p train --test objects_start -- --ignored --nocapture`
 
 use scene::objects::ObjectsFile;
+use train::objects::truth::{follow, inv_apply};
 use train::objects::RigidObject;
 use train::{TrainConfig, Trainer};
 
@@ -22,43 +23,6 @@ fn env<T: std::str::FromStr>(key: &str, default: T) -> T {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(default)
-}
-
-/// `1 − rms/rms_if_still` of the object's Gaussians (object frame `x`) between its
-/// trajectory's relative motion and the true one, over its knot times.
-fn follow(o: &RigidObject, x: &[[f32; 3]], gt: &ObjectsFile, index: usize) -> Option<f64> {
-    let pose_at = |t: f32| {
-        gt.frames
-            .iter()
-            .min_by(|a, b| (a.time - t).abs().total_cmp(&(b.time - t).abs()))
-            .map(|f| f.object_to_world[index])
-    };
-    let tr = &o.trajectory;
-    let t0 = tr.times[0];
-    let (p0, g0) = (tr.pose(t0), pose_at(t0)?);
-    let (mut err, mut still) = (0.0f64, 0.0f64);
-    for &t in &tr.times {
-        let (p, g) = (tr.pose(t), pose_at(t)?);
-        for xi in x {
-            let a = p0.apply(*xi);
-            let ours = p.apply(*xi);
-            // True motion of the anchor: g · g0⁻¹ · a.
-            let local = inv_apply(&g0, a);
-            let truth = scene::objects::apply(&g, local);
-            err += (0..3)
-                .map(|c| f64::from(ours[c] - truth[c]).powi(2))
-                .sum::<f64>();
-            still += (0..3)
-                .map(|c| f64::from(a[c] - truth[c]).powi(2))
-                .sum::<f64>();
-        }
-    }
-    (still > 1e-9).then(|| 1.0 - (err / still).sqrt())
-}
-
-fn inv_apply(m: &[[f32; 4]; 4], p: [f32; 3]) -> [f32; 3] {
-    let d = [p[0] - m[0][3], p[1] - m[1][3], p[2] - m[2][3]];
-    std::array::from_fn(|k| m[0][k] * d[0] + m[1][k] * d[1] + m[2][k] * d[2])
 }
 
 /// Per knot: the true and recovered rotation since the first knot, and how far the

@@ -13,11 +13,13 @@ mod render;
 mod route;
 mod spec;
 mod texture;
+mod variety;
 mod vehicles;
 mod write;
 
 pub use custom::BOUND;
 pub use spec::{AddSpec, PropKind, RouteSpec, Waypoint};
+pub use variety::{ground_truth_id_maps, varied, VariedScene};
 
 use crate::SceneError;
 use rand::{Rng, SeedableRng};

@@ -31,8 +31,13 @@ pub struct ObjectsConfig {
     pub ring_gauge: bool,
     /// Width in pixels of the band around a mask where the background's depth is read.
     pub ring_px: u32,
-    /// An object whose mask-lifted track moves less than this fraction of its own size (and
-    /// turns less than `static_angle_deg`) is static: one fixed pose.
+    /// The static test (`Tracker::still_scale`, docs/objects.md): an object whose track's
+    /// centroid moves, as the cameras see it, less than `static_image_motion` of its size
+    /// in the image (RMS over the views, under the gauge that makes it move least), that
+    /// turns less than `static_angle_deg` or so that its Gaussians move less than
+    /// `static_motion` of its size, and whose still copy stands where the scene around its
+    /// silhouette is (`static_ring_tolerance`), is static: one fixed pose.
+    pub static_image_motion: f32,
     pub static_motion: f32,
     pub static_angle_deg: f32,
     /// And only if that still copy stands where the scene around its silhouette is: its
@@ -97,6 +102,7 @@ impl Default for ObjectsConfig {
             lift_thickness: vec![0.25, 0.1, 0.5],
             ring_gauge: false,
             ring_px: 3,
+            static_image_motion: 0.1,
             static_motion: 0.25,
             static_angle_deg: 10.0,
             static_ring_tolerance: 1.6,
@@ -164,6 +170,7 @@ impl ObjectsConfig {
             }
         }
         let non_negative = [
+            ("objects.static_image_motion", self.static_image_motion),
             ("objects.static_motion", self.static_motion),
             ("objects.static_angle_deg", self.static_angle_deg),
             ("objects.track_lr_means", self.track_lr_means),

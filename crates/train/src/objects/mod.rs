@@ -41,6 +41,7 @@ pub mod start;
 pub mod store;
 pub mod track;
 pub mod trajectory;
+pub mod truth;
 
 pub use config::ObjectsConfig;
 pub use place::NO_OBJECT;

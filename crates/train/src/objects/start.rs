@@ -24,6 +24,8 @@ pub struct StartReport {
     /// the object's size (world units, after the gauge).
     pub residual_motion: f32,
     pub size: f32,
+    /// The static test's measures ([`track::StillEvidence`]).
+    pub still: track::StillEvidence,
     pub gaussians: usize,
     /// The gauge applied to the lifted guess of its size and distance.
     pub scale: f32,
@@ -190,6 +192,7 @@ pub fn start(
             is_static: f.is_static,
             residual_motion: f.residual_motion,
             size,
+            still: f.still,
             gaussians: if left_to_field { 0 } else { f.model.len() },
             scale: f.scale,
             mask_iou: f.mask_iou,

@@ -96,6 +96,26 @@ pub struct Tracker<'a> {
     /// The gauge applied so far to the first guess of size and distance.
     scale: f32,
     residual_motion: f32,
+    still: StillEvidence,
+}
+
+/// What the static test measured ([`Tracker::still_scale`]), logged and kept in the start
+/// report so a wrong decision can be traced to the criterion that made it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StillEvidence {
+    /// RMS motion of its centroid under the least-motion gauge as the cameras see it,
+    /// across the image, over its size there (`Tracker::image_motion`; static below
+    /// `static_image_motion`).
+    pub motion: f32,
+    /// Largest rotation from the first knot, degrees.
+    pub angle_deg: f32,
+    /// RMS displacement of its Gaussians by the rotation alone, over its extent (a turn
+    /// counts when both this reaches `static_motion` and the angle `static_angle_deg`).
+    pub turn: f32,
+    /// `|ln(ring ratio / gauge)|`: how far in front of or behind the scene around its
+    /// silhouette the still copy would stand (static below `ln static_ring_tolerance`);
+    /// None when no view sees a background around it.
+    pub ring_offset: Option<f32>,
 }
 
 const HP: AdamHyper = AdamHyper {
@@ -339,6 +359,7 @@ impl<'a> Tracker<'a> {
             springs: Vec::new(),
             scale: 1.0,
             residual_motion: 0.0,
+            still: StillEvidence::default(),
         }
     }
 
@@ -375,23 +396,91 @@ impl<'a> Tracker<'a> {
         let centres: Vec<[f32; 3]> = self.views.iter().map(|v| v.cam.center()).collect();
         let size = extent(&self.model.means);
         let tr = &self.object.trajectory;
-        let (s, rms) = gauge::least_motion_scale(tr, &centres);
+        // The path of the Gaussians' centroid rather than of the frame's origin: a spin
+        // about an axis through the centroid (a still barrel's, which the track cannot pin
+        // down) swings an off-centre origin around but leaves the centroid in place.
+        let path = centroid_path(tr, &self.model.means);
+        let (s, rms) = gauge::least_motion_scale(&path, &centres);
         self.residual_motion = rms;
+        let motion = self.image_motion(&path, s, size);
         let (_, angle) = tr.motion_extent();
         let c = self.cfg;
         // A camera moving along an object's path sees the same images from the object
         // moving and from a static copy at another depth: the least-motion gauge cannot tell
         // them apart. What is around the silhouette can: the static copy must stand where
         // that scene is (its ring ratio near 1), not far in front of it or behind it.
-        let placed = self.ring_ratio().is_none_or(|r| {
-            let off = (r / s).ln().abs();
-            off <= c.static_ring_tolerance.ln()
-        });
-        let still = tr.len() < 2
-            || (rms < c.static_motion * size * s
-                && angle.to_degrees() < c.static_angle_deg
-                && placed);
+        let ring_offset = self.ring_ratio().map(|r| (r / s).ln().abs());
+        let turn = self.turn_motion() / size.max(1e-12);
+        self.still = StillEvidence {
+            motion,
+            angle_deg: angle.to_degrees(),
+            turn,
+            ring_offset,
+        };
+        let placed = ring_offset.is_none_or(|off| off <= c.static_ring_tolerance.ln());
+        // A turn counts by how far it moves the object's Gaussians, the yardstick of the
+        // translation: a still object symmetric about an axis (a barrel, a ball) can seem
+        // to spin about it in the track, which moves nothing one can see.
+        let turned = angle.to_degrees() >= c.static_angle_deg && turn >= c.static_motion;
+        let still = tr.len() < 2 || (motion < c.static_image_motion && !turned && placed);
         still.then_some(s)
+    }
+
+    /// RMS over the views of how far the gauged centroid `path` strays from its mean
+    /// position as each camera sees it: across the image over the object's size there, and
+    /// along the ray as the relative change of its apparent size. One view fixes a small
+    /// object's distance only to a few percent of the depth (its apparent size, to a pixel
+    /// or so), which can be more than the object's size: measured in world units, a still
+    /// prop's track wobbles in depth by a third of its size; measured as the camera sees
+    /// it, by a few percent.
+    fn image_motion(&self, path: &Trajectory, s: f32, size: f32) -> f32 {
+        let n = path.len().min(self.views.len());
+        let gauged: Vec<[f32; 3]> = (0..n)
+            .map(|k| {
+                let (c, p) = (self.views[k].cam.center(), path.translations[k]);
+                std::array::from_fn(|i| c[i] + s * (p[i] - c[i]))
+            })
+            .collect();
+        let mean = centroid(gauged.as_flattened());
+        let (mut sum, mut m) = (0.0f64, 0usize);
+        for (v, x) in self.views.iter().zip(&gauged) {
+            let (Some((a, depth)), Some((b, depth_mean))) =
+                (v.cam.project(*x), v.cam.project(mean))
+            else {
+                continue;
+            };
+            let pixels = v.cam.fx * size * s / depth;
+            let across = (a[0] - b[0]).hypot(a[1] - b[1]) / pixels.max(1e-6);
+            // Along the ray, as the change of its apparent size.
+            let along = (depth - depth_mean) / depth_mean;
+            sum += f64::from(across * across + along * along);
+            m += 1;
+        }
+        if m == 0 {
+            // No view sees the still copy in front of it (a gauge that shrinks the path
+            // into the cameras): nothing shows that the object stands still.
+            return f32::INFINITY;
+        }
+        (sum / m as f64).sqrt() as f32
+    }
+
+    /// RMS over the knots and the object's Gaussians of how far the rotation since the
+    /// first knot moves them about their centroid (object units, before any gauge).
+    fn turn_motion(&self) -> f32 {
+        let tr = &self.object.trajectory;
+        let c = centroid(&self.model.means);
+        let r0 = quat::matrix_of(&tr.rotations[0]);
+        let (mut sum, mut n) = (0.0f64, 0usize);
+        for q in &tr.rotations {
+            let r = quat::matrix_of(q);
+            for m in self.model.means.chunks_exact(3) {
+                let x = [m[0] - c[0], m[1] - c[1], m[2] - c[2]];
+                let (a, b) = (quat::rotate(&r, x), quat::rotate(&r0, x));
+                sum += (0..3).map(|k| f64::from(a[k] - b[k]).powi(2)).sum::<f64>();
+                n += 1;
+            }
+        }
+        (sum / n.max(1) as f64).sqrt() as f32
     }
 
     /// The median over views of (median background depth around the mask) / (the origin's
@@ -518,6 +607,7 @@ impl<'a> Tracker<'a> {
             trajectory: o.trajectory,
             scale: self.scale,
             residual_motion: self.residual_motion,
+            still: self.still,
             mask_iou,
         })
     }
@@ -553,14 +643,18 @@ pub fn fit(
     rng: &mut impl Rng,
 ) -> Result<Tracked, splat::SplatError> {
     let mut best: Option<(f32, Tracker)> = None;
+    let mut evidence = (0.0, StillEvidence::default());
     for (i, &th) in cfg.lift_thickness.iter().enumerate() {
         let mut t = Tracker::new(views, id, name, lift(th), cfg);
         t.sequential(rng)?;
         if i == 0 {
-            if let Some(s) = t.still_scale() {
+            let still = t.still_scale();
+            tracing::debug!(object = name, evidence = ?t.still, is_static = still.is_some(), "static test");
+            if let Some(s) = still {
                 t.hold_still(s);
                 return t.finish();
             }
+            evidence = (t.residual_motion, t.still);
         }
         let loss = t.mean_loss()?;
         tracing::debug!(
@@ -578,6 +672,8 @@ pub fn fit(
         t.ring_gauge();
     }
     t.settle_contact(1.0, rng)?;
+    // The static test ran on the first thickness's track; report what it measured there.
+    (t.residual_motion, t.still) = evidence;
     t.finish()
 }
 
@@ -593,6 +689,8 @@ pub struct Tracked {
     pub scale: f32,
     /// RMS motion of its origin under the least-motion gauge (world units).
     pub residual_motion: f32,
+    /// What the static test measured.
+    pub still: StillEvidence,
     /// How well the rigid fit covers its masks ([`Tracker::mask_iou`]).
     pub mask_iou: f32,
 }
@@ -608,6 +706,17 @@ fn extent(means: &[f32]) -> f32 {
         }
     }
     (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f32::max)
+}
+
+/// `tr` with each knot's translation moved to where it carries the centroid of `means`.
+fn centroid_path(tr: &Trajectory, means: &[f32]) -> Trajectory {
+    let c = centroid(means);
+    let mut out = tr.clone();
+    for (p, q) in out.translations.iter_mut().zip(&tr.rotations) {
+        let v = quat::rotate(&quat::matrix_of(q), c);
+        *p = [p[0] + v[0], p[1] + v[1], p[2] + v[2]];
+    }
+    out
 }
 
 /// Mean of `N·3` points.

@@ -130,6 +130,33 @@ fn compare_trains_three_runs_and_reports_every_key() {
         rigid > 0.5 && rigid > base + 0.3,
         "white-suv follows {rigid} (rigid) vs {base} (baseline)"
     );
+    // The rigid run also carries its node-level follow and the start's decisions; the
+    // field's runs have neither.
+    let decision = key(&results, "rigid.rigid_decision_per_object");
+    assert_eq!(decision["white-suv"], "moving", "{decision}");
+    assert!(decision
+        .as_object()
+        .unwrap()
+        .values()
+        .all(|d| d == "static" || d == "moving"));
+    let share = key(&results, "rigid.node_share_per_object.white-suv");
+    assert!(
+        share.as_f64().is_some_and(|s| s > 0.0 && s <= 1.0),
+        "{share}"
+    );
+    let in_node = key(&results, "rigid.follow_in_node_per_object.white-suv");
+    assert!(
+        in_node.as_f64().is_some_and(|f| f.is_finite() && f <= 1.0),
+        "{in_node}"
+    );
+    for run in ["baseline", "semdynreg"] {
+        assert!(
+            key(&results, run)
+                .get("rigid_decision_per_object")
+                .is_none(),
+            "{run}"
+        );
+    }
     // Only the SemDynReg run logs the regularizer, and only inside its window.
     let log = |run: &str| std::fs::read_to_string(out.join(run).join("metrics.jsonl")).unwrap();
     assert!(!log("baseline").contains("reg_objects"));

@@ -67,6 +67,9 @@ pub struct VehicleMetrics {
     /// Runs with rigid objects only: `consistency` again over each group's members split by
     /// whether they belong to that object's node.
     pub node_split: Option<NodeSplit>,
+    /// Runs with rigid objects only: each object's ID and whether its start found it
+    /// static (one pose).
+    pub rigid: Vec<(u8, bool)>,
 }
 
 /// A vehicle's group is whatever the render at `t_ref` drew inside its ground-truth mask. In
@@ -237,6 +240,11 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
         consistency: acc.report()?,
         rigidity: rigidity.report()?,
         node_split: split.map(SplitAccumulator::finish),
+        rigid: loaded
+            .objects()
+            .iter()
+            .map(|o| (o.id, o.is_static))
+            .collect(),
     })
 }
 
@@ -257,6 +265,7 @@ pub fn named_consistency(run: &Path, iteration: Option<u32>) -> Result<Option<se
         consistency: r,
         rigidity,
         node_split,
+        ..
     } = run_consistency(run, iteration)?;
     let follow_in = |rep: &Option<ConsistencyReport>, id: u8| {
         rep.as_ref()

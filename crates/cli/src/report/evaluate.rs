@@ -185,6 +185,9 @@ pub fn evaluate_run(
         deformation_follow_per_object: Default::default(),
         rigidity_rms: None,
         rigidity_rms_per_object: Default::default(),
+        node_share_per_object: Default::default(),
+        follow_in_node_per_object: Default::default(),
+        rigid_decision_per_object: Default::default(),
         renders: renders.0.display().to_string(),
     };
     Ok(RunEval {

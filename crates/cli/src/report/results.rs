@@ -90,6 +90,17 @@ pub struct MethodResults {
     /// The same per vehicle (keyed by its name in `objects.json`). Empty when not computed.
     #[serde(default)]
     pub rigidity_rms_per_object: BTreeMap<String, f64>,
+    /// Runs with rigid objects (docs/objects.md, "What follows and what does not"): per
+    /// vehicle, the share of its group (the Gaussians drawn inside its mask) that belongs
+    /// to its own node, and how much of its motion those follow. Empty for other runs.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub node_share_per_object: BTreeMap<String, f64>,
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub follow_in_node_per_object: BTreeMap<String, f64>,
+    /// Runs with rigid objects: what the objects' start decided for each object it placed,
+    /// `static` (one pose) or `moving`. Objects left to the field have no entry.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub rigid_decision_per_object: BTreeMap<String, String>,
     /// Where the rendered frames came from.
     pub renders: String,
 }

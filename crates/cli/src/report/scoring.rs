@@ -2,7 +2,7 @@
 //! crops at t = 0…5 s, and the deformation-consistency and rigidity metrics of the trained
 //! model): what `compare` reports for its three runs and `sweep` for each of its runs.
 
-use super::consistency::{run_consistency, VehicleMetrics};
+use super::consistency::{run_consistency, NodeSplit, VehicleMetrics};
 use super::crops::CropPolicy;
 use super::evaluate::{evaluate_run, EvalSet, RenderDir, RunEval};
 use super::inputs;
@@ -153,11 +153,13 @@ fn add_consistency(res: &mut MethodResults, run: &Path, set: &EvalSet, notes: &m
     let Some(VehicleMetrics {
         consistency: r,
         rigidity,
-        ..
+        node_split,
+        rigid,
     }) = consistency(run, notes)
     else {
         return;
     };
+    add_rigid_objects(res, set, node_split.as_ref(), &rigid);
     res.deformation_consistency_rms = Some(r.rms);
     res.deformation_consistency_per_object = r
         .per_object
@@ -174,6 +176,36 @@ fn add_consistency(res: &mut MethodResults, run: &Path, set: &EvalSet, notes: &m
         .per_object
         .iter()
         .map(|x| (object_name(set, x.object), x.rms))
+        .collect();
+}
+
+/// The node-level split and the start's decisions of a run with rigid objects.
+fn add_rigid_objects(
+    res: &mut MethodResults,
+    set: &EvalSet,
+    split: Option<&NodeSplit>,
+    rigid: &[(u8, bool)],
+) {
+    res.rigid_decision_per_object = rigid
+        .iter()
+        .map(|&(id, s)| {
+            (
+                object_name(set, id),
+                if s { "static" } else { "moving" }.into(),
+            )
+        })
+        .collect();
+    let Some(split) = split else { return };
+    res.node_share_per_object = split
+        .share
+        .iter()
+        .map(|&(id, share)| (object_name(set, id), share))
+        .collect();
+    res.follow_in_node_per_object = split
+        .in_node
+        .iter()
+        .flat_map(|r| &r.per_object)
+        .filter_map(|x| Some((object_name(set, x.object), x.follow()?)))
         .collect();
 }
 

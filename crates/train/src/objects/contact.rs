@@ -117,7 +117,8 @@ pub fn robust_line(points: &[(f32, f32)]) -> Option<(f32, f32, f32)> {
     Some((median(&mut levels)?, slope, t_mean))
 }
 
-fn median(v: &mut [f32]) -> Option<f32> {
+/// The median of `v` (reordered), None when it is empty.
+pub(super) fn median(v: &mut [f32]) -> Option<f32> {
     if v.is_empty() {
         return None;
     }

@@ -19,7 +19,8 @@
 //!   trajectory, `1 − rms(error) / rms(error if still)` over its knots ([`follow`]; the
 //!   node-level figure, where `eval`'s pools every Gaussian drawn inside the mask).
 
-use super::{RigidObject, RigidObjects};
+use super::contact::median;
+use super::{track, RigidObject, RigidObjects};
 use crate::state::GaussianState;
 use scene::objects::{apply, ObjectsFile};
 use scene::Dataset;
@@ -94,15 +95,6 @@ fn angle_deg(r: &[[f32; 3]; 3]) -> f32 {
     ((tr - 1.0) * 0.5).clamp(-1.0, 1.0).acos().to_degrees()
 }
 
-fn median(mut v: Vec<f32>) -> Option<f32> {
-    if v.is_empty() {
-        return None;
-    }
-    let mid = v.len() / 2;
-    v.select_nth_unstable_by(mid, f32::total_cmp);
-    Some(v[mid])
-}
-
 /// Scores every object of `truth` against the started node `node` of a run whose rows
 /// are `state` and whose training views are `ds`.
 pub fn score(
@@ -164,7 +156,9 @@ pub fn score(
                 ring_offset: report.and_then(|r| r.still.ring_offset),
                 mask_iou: report.map(|r| r.mask_iou),
             };
-            if let (Some(o), Some(c)) = (object, centroid(state, info.id)) {
+            let local = local_means(state, info.id);
+            if let Some(o) = object.filter(|_| !local.is_empty()) {
+                let c = track::centroid(local.as_flattened());
                 let poses: Vec<_> = frames.iter().map(|f| o.trajectory.pose(f.time)).collect();
                 let p: Vec<[f32; 3]> = poses.iter().map(|q| q.apply(c)).collect();
                 if true_path >= STILL_PATH {
@@ -192,7 +186,7 @@ pub fn score(
                 );
                 s.depth_ratio = depth_ratio(ds, o, c, truth, k, centre);
                 if truly_moving {
-                    s.follow = follow(o, &local_means(state, info.id), truth, k);
+                    s.follow = follow(o, &local, truth, k);
                 }
             }
             s
@@ -248,21 +242,6 @@ fn local_means(state: &GaussianState, id: u8) -> Vec<[f32; 3]> {
         .collect()
 }
 
-/// The mean of the object's Gaussians' means, in its own frame.
-fn centroid(state: &GaussianState, id: u8) -> Option<[f32; 3]> {
-    let mut sum = [0.0f64; 3];
-    let mut n = 0usize;
-    for (row, &o) in state.object.iter().enumerate() {
-        if o == id {
-            for (c, s) in sum.iter_mut().enumerate() {
-                *s += f64::from(state.model.means[3 * row + c]);
-            }
-            n += 1;
-        }
-    }
-    (n > 0).then(|| sum.map(|s| (s / n as f64) as f32))
-}
-
 /// Median over the training views of the fitted point's camera depth over the true one's.
 fn depth_ratio(
     ds: &Dataset,
@@ -272,7 +251,7 @@ fn depth_ratio(
     k: usize,
     centre: [f32; 3],
 ) -> Option<f32> {
-    let ratios = ds
+    let mut ratios: Vec<f32> = ds
         .train
         .iter()
         .filter_map(|f| {
@@ -282,7 +261,7 @@ fn depth_ratio(
             (zg > 0.0).then(|| zp / zg)
         })
         .collect();
-    median(ratios)
+    median(&mut ratios)
 }
 
 #[cfg(test)]
@@ -404,7 +383,5 @@ mod tests {
     fn path_lengths_add_segments() {
         let p = [[0.0, 0.0, 0.0], [3.0, 4.0, 0.0], [3.0, 4.0, 1.0]];
         assert_eq!(path_length(&p), 6.0);
-        assert_eq!(median(vec![3.0, 1.0, 2.0]), Some(2.0));
-        assert_eq!(median(Vec::new()), None);
     }
 }

@@ -139,6 +139,14 @@ fn compare_trains_three_runs_and_reports_every_key() {
         .unwrap()
         .values()
         .all(|d| d == "static" || d == "moving"));
+    // The mover's gauge carries its confidence (the share of its cues that agree).
+    let confidence = key(&results, "rigid.scale_confidence_per_object.white-suv");
+    assert!(
+        confidence
+            .as_f64()
+            .is_some_and(|c| (0.0..=1.0).contains(&c) && c > 0.0),
+        "{confidence}"
+    );
     let share = key(&results, "rigid.node_share_per_object.white-suv");
     assert!(
         share.as_f64().is_some_and(|s| s > 0.0 && s <= 1.0),
@@ -153,7 +161,10 @@ fn compare_trains_three_runs_and_reports_every_key() {
         assert!(
             key(&results, run)
                 .get("rigid_decision_per_object")
-                .is_none(),
+                .is_none()
+                && key(&results, run)
+                    .get("scale_confidence_per_object")
+                    .is_none(),
             "{run}"
         );
     }

@@ -159,6 +159,57 @@ fn still_test(ob: &serde_json::Value) -> String {
     format!("{m} / {a} / {t} / {r}")
 }
 
+/// A mover's gauge readings relative to the lift (`ln`: lift / ring / surface) and the
+/// chosen gauge's confidence.
+fn readings(ob: &serde_json::Value) -> String {
+    let c = &ob["cues"];
+    if c.is_null() {
+        return "–".into();
+    }
+    let r = |k: &str| fmt(c[k]["ln_factor"].as_f64(), 2);
+    let conf = fmt(ob["gauge"]["confidence"].as_f64(), 2);
+    format!("0 / {} / {} ({conf})", r("ring"), r("surface"))
+}
+
+/// Per reading of the gauge (the lift's, the ring's, the surface contact's, their median),
+/// how many movers it would have placed within `ln 1.1` of their true depth: the truth's
+/// factor relative to the lift is the chosen one over the measured depth ratio.
+struct GaugeTally {
+    movers: usize,
+    within: [usize; 4],
+}
+
+impl GaugeTally {
+    fn add(&mut self, ob: &serde_json::Value) {
+        let (c, g) = (&ob["cues"], &ob["gauge"]);
+        let (Some(depth), Some(chosen)) = (ob["depth_ratio"].as_f64(), g["ln_factor"].as_f64())
+        else {
+            return;
+        };
+        let truth = chosen - depth.ln();
+        let read = |k: &str| c[k]["ln_factor"].as_f64();
+        let mut all: Vec<f64> = [Some(0.0), read("ring"), read("surface")]
+            .into_iter()
+            .flatten()
+            .collect();
+        all.sort_by(f64::total_cmp);
+        let median = if all.len() == 3 { all[1] } else { 0.0 };
+        let each = [Some(0.0), read("ring"), read("surface"), Some(median)];
+        self.movers += 1;
+        for (n, r) in self.within.iter_mut().zip(each) {
+            *n += usize::from(r.is_some_and(|r| (r - truth).abs() <= 1.1f64.ln()));
+        }
+    }
+
+    fn line(&self) -> String {
+        let [l, r, s, m] = self.within;
+        let n = self.movers;
+        format!(
+            "gauge readings within 10 % of the true depth, movers called moving: lift {l}/{n}, ring {r}/{n}, surface {s}/{n}, their median {m}/{n}"
+        )
+    }
+}
+
 fn fmt(v: Option<f64>, digits: usize) -> String {
     v.map_or("–".into(), |v| format!("{v:.digits$}"))
 }
@@ -171,10 +222,14 @@ fn summarize(dir: &Path) -> Res<String> {
         .collect();
     files.sort();
     let mut rows = String::from(
-        "| seed | object | truth | decision | true path | path ratio | displacement error | depth ratio | rotation error ° | follow | gauge | still test: motion / turn ° / turn motion / ring | mask IoU |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| seed | object | truth | decision | true path | path ratio | displacement error | depth ratio | rotation error ° | follow | gauge | readings: lift / ring / surface (confidence) | still test: motion / turn ° / turn motion / ring | mask IoU |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let (mut movers, mut movers_ok, mut within10, mut still, mut still_ok) = (0, 0, 0, 0, 0);
     let mut follow90 = 0;
+    let mut tally = GaugeTally {
+        movers: 0,
+        within: [0; 4],
+    };
     for f in &files {
         let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(f)?)?;
         for ob in v["objects"].as_array().ok_or("objects")? {
@@ -188,12 +243,15 @@ fn summarize(dir: &Path) -> Res<String> {
                     decision == "moving" && ratio.is_some_and(|r| (r - 1.0).abs() <= 0.1),
                 );
                 follow90 += usize::from(ob["follow"].as_f64().is_some_and(|f| f >= 0.9));
+                if decision == "moving" {
+                    tally.add(ob);
+                }
             } else {
                 still += 1;
                 still_ok += usize::from(decision == "static");
             }
             rows += &format!(
-                "| {} | {} | {} | {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                "| {} | {} | {} | {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                 v["seed"],
                 ob["name"].as_str().unwrap_or("?"),
                 if moving { "moving" } else { "still" },
@@ -205,13 +263,15 @@ fn summarize(dir: &Path) -> Res<String> {
                 fmt(ob["rotation_error_deg"].as_f64(), 1),
                 fmt(ob["follow"].as_f64(), 2),
                 fmt(ob["scale"].as_f64(), 2),
+                readings(ob),
                 still_test(ob),
                 fmt(ob["mask_iou"].as_f64(), 2),
             );
         }
     }
     Ok(format!(
-        "{} scenes: movers called moving {movers_ok}/{movers}, path length within 10 % {within10}/{movers}, following ≥ 90 % {follow90}/{movers}; still objects called static {still_ok}/{still}\n\n{rows}",
-        files.len()
+        "{} scenes: movers called moving {movers_ok}/{movers}, path length within 10 % {within10}/{movers}, following ≥ 90 % {follow90}/{movers}; still objects called static {still_ok}/{still}\n\n{}\n\n{rows}",
+        files.len(),
+        tally.line()
     ))
 }

@@ -498,6 +498,14 @@ impl LoadedModel {
             .map_or(&[][..], |n| n.objects.as_slice())
     }
 
+    /// What the rigid objects' start found per object (empty for runs without them, and
+    /// for checkpoints written before it was kept).
+    pub fn start_reports(&self) -> &[crate::objects::start::StartReport] {
+        self.nodes
+            .get::<RigidObjects>()
+            .map_or(&[][..], |n| n.start_reports.as_slice())
+    }
+
     /// Whether the field was past its warm-up at this checkpoint (before it, δ = 0).
     pub fn field_active(&self) -> bool {
         self.iteration >= self.cfg.field.warm_up

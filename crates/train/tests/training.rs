@@ -381,4 +381,45 @@ fn rigid_objects_survive_densify_and_resume() {
             .collect()
     };
     assert_eq!(poses(&a), poses(&c), "trajectories");
+    // The start's report (decisions, the gauge's cues and confidence) is kept in the
+    // checkpoint, so evaluation after a resume still reports it.
+    let reports = |t: &Trainer| t.nodes.get::<RigidObjects>().unwrap().start_reports.clone();
+    assert_eq!(reports(&c).len(), 3);
+    assert_eq!(reports(&a), reports(&c), "start reports");
+    for r in reports(&c).iter().filter(|r| !r.is_static) {
+        let g = r.gauge.expect("a mover's gauge is chosen from its cues");
+        assert!(
+            (0.0..=1.0).contains(&g.confidence) && g.ln_factor == 0.0,
+            "{g:?}"
+        );
+    }
+}
+
+/// `min_scale_confidence = 1` asks every cue to agree with a mover's gauge; a mover whose
+/// cues do not is left to the deformation field (no Gaussians, no trajectory), and the
+/// start's report says so.
+#[test]
+fn a_mover_without_an_agreed_depth_is_left_to_the_field() {
+    let mut cfg = common::small_config(30);
+    cfg.objects.enabled = true;
+    cfg.objects.start_iter = 20;
+    (cfg.objects.lift_points, cfg.objects.lift_thickness) = (300, vec![0.25]);
+    (cfg.objects.track_pose_iters, cfg.objects.track_shape_iters) = (5, 2);
+    cfg.objects.track_refine_iters = 20;
+    cfg.objects.min_scale_confidence = 1.0;
+    cfg.validate().unwrap();
+    let mut t = Trainer::new(cfg, scene_with_id_maps(), 7).unwrap();
+    for _ in 0..25 {
+        t.step().unwrap();
+    }
+    let node = t.nodes.get::<RigidObjects>().expect("objects started");
+    for r in &node.start_reports {
+        let placed = node.objects.iter().any(|o| o.id == r.id);
+        let doubted = !r.is_static && r.gauge.is_some_and(|g| g.confidence < 1.0);
+        assert_eq!(r.left_to_field, doubted, "{r:?}");
+        assert_eq!(placed, !doubted, "{}", r.name);
+        if doubted {
+            assert_eq!(r.gaussians, 0);
+        }
+    }
 }

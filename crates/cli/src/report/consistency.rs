@@ -67,9 +67,46 @@ pub struct VehicleMetrics {
     /// Runs with rigid objects only: `consistency` again over each group's members split by
     /// whether they belong to that object's node.
     pub node_split: Option<NodeSplit>,
-    /// Runs with rigid objects only: each object's ID and whether its start found it
-    /// static (one pose).
-    pub rigid: Vec<(u8, bool)>,
+    /// Runs with rigid objects only: what the objects' start decided for each object.
+    pub rigid: Vec<RigidStart>,
+}
+
+/// The start's decision on one object and the confidence of its gauge.
+pub struct RigidStart {
+    pub id: u8,
+    /// `static` (one pose), `moving` or `field` (left to the deformation field).
+    pub decision: &'static str,
+    /// The gauge's confidence for a mover placed by its cues (`objects::scale`).
+    pub scale_confidence: Option<f32>,
+}
+
+/// The start's decisions from the checkpoint's start reports, or from the objects
+/// themselves for checkpoints written before the reports were kept.
+fn rigid_starts(loaded: &train::checkpoint::LoadedModel) -> Vec<RigidStart> {
+    let reports = loaded.start_reports();
+    if reports.is_empty() {
+        return loaded
+            .objects()
+            .iter()
+            .map(|o| RigidStart {
+                id: o.id,
+                decision: if o.is_static { "static" } else { "moving" },
+                scale_confidence: None,
+            })
+            .collect();
+    }
+    reports
+        .iter()
+        .map(|r| RigidStart {
+            id: r.id,
+            decision: match (r.left_to_field, r.is_static) {
+                (true, _) => "field",
+                (false, true) => "static",
+                (false, false) => "moving",
+            },
+            scale_confidence: r.gauge.map(|g| g.confidence),
+        })
+        .collect()
 }
 
 /// A vehicle's group is whatever the render at `t_ref` drew inside its ground-truth mask. In
@@ -240,11 +277,7 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
         consistency: acc.report()?,
         rigidity: rigidity.report()?,
         node_split: split.map(SplitAccumulator::finish),
-        rigid: loaded
-            .objects()
-            .iter()
-            .map(|o| (o.id, o.is_static))
-            .collect(),
+        rigid: rigid_starts(&loaded),
     })
 }
 

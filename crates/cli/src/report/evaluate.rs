@@ -188,6 +188,7 @@ pub fn evaluate_run(
         node_share_per_object: Default::default(),
         follow_in_node_per_object: Default::default(),
         rigid_decision_per_object: Default::default(),
+        scale_confidence_per_object: Default::default(),
         renders: renders.0.display().to_string(),
     };
     Ok(RunEval {

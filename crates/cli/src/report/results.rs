@@ -97,10 +97,14 @@ pub struct MethodResults {
     pub node_share_per_object: BTreeMap<String, f64>,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub follow_in_node_per_object: BTreeMap<String, f64>,
-    /// Runs with rigid objects: what the objects' start decided for each object it placed,
-    /// `static` (one pose) or `moving`. Objects left to the field have no entry.
+    /// Runs with rigid objects: what the objects' start decided for each object, `static`
+    /// (one pose), `moving`, or `field` (left to the deformation field).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub rigid_decision_per_object: BTreeMap<String, String>,
+    /// Runs with rigid objects: per mover, the confidence of the gauge its start chose
+    /// (`objects::scale`, 0–1).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub scale_confidence_per_object: BTreeMap<String, f64>,
     /// Where the rendered frames came from.
     pub renders: String,
 }

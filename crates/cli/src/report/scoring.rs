@@ -2,7 +2,7 @@
 //! crops at t = 0…5 s, and the deformation-consistency and rigidity metrics of the trained
 //! model): what `compare` reports for its three runs and `sweep` for each of its runs.
 
-use super::consistency::{run_consistency, NodeSplit, VehicleMetrics};
+use super::consistency::{run_consistency, NodeSplit, RigidStart, VehicleMetrics};
 use super::crops::CropPolicy;
 use super::evaluate::{evaluate_run, EvalSet, RenderDir, RunEval};
 use super::inputs;
@@ -184,16 +184,15 @@ fn add_rigid_objects(
     res: &mut MethodResults,
     set: &EvalSet,
     split: Option<&NodeSplit>,
-    rigid: &[(u8, bool)],
+    rigid: &[RigidStart],
 ) {
     res.rigid_decision_per_object = rigid
         .iter()
-        .map(|&(id, s)| {
-            (
-                object_name(set, id),
-                if s { "static" } else { "moving" }.into(),
-            )
-        })
+        .map(|r| (object_name(set, r.id), r.decision.into()))
+        .collect();
+    res.scale_confidence_per_object = rigid
+        .iter()
+        .filter_map(|r| Some((object_name(set, r.id), f64::from(r.scale_confidence?))))
         .collect();
     let Some(split) = split else { return };
     res.node_share_per_object = split

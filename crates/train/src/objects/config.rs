@@ -1,6 +1,7 @@
 //! `[objects]`: every constant of the rigid-object mode (docs/objects.md). Off by default:
 //! the baseline and the paper's SemDynReg are unchanged unless `enabled` (`train --objects`).
 
+use super::scale::GaugeRule;
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -29,6 +30,16 @@ pub struct ObjectsConfig {
     /// only by cancelling the rendered background's bias, and on a synthetic box with the
     /// true background depth it costs 14 points of follow (docs/objects.md).
     pub ring_gauge: bool,
+    /// How a mover's common factor of size and distance is set (`objects::scale`): `lift`
+    /// keeps the first view's ring depth, `cues` takes the median of that reading, the
+    /// ring depth over all views and the surface contact over all views.
+    pub gauge: GaugeRule,
+    /// Two readings of the gauge agree within this `ln` factor (0.1: about the 10 % of a
+    /// path length); the gauge's confidence is the share of readings that agree with it.
+    pub gauge_tolerance: f32,
+    /// A mover whose gauge has a lower confidence is left to the deformation field, with a
+    /// warning saying so, rather than placed at a depth no cue backs (0: never).
+    pub min_scale_confidence: f32,
     /// Width in pixels of the band around a mask where the background's depth is read.
     pub ring_px: u32,
     /// The static test (`Tracker::still_scale`, docs/objects.md): an object whose track's
@@ -101,6 +112,9 @@ impl Default for ObjectsConfig {
             lift_points: 3000,
             lift_thickness: vec![0.25, 0.1, 0.5],
             ring_gauge: false,
+            gauge: GaugeRule::Lift,
+            gauge_tolerance: 0.1,
+            min_scale_confidence: 0.0,
             ring_px: 3,
             static_image_motion: 0.1,
             static_motion: 0.25,
@@ -156,6 +170,18 @@ impl ObjectsConfig {
             return Err(format!(
                 "objects.static_ring_tolerance must be finite and > 1, got {}",
                 self.static_ring_tolerance
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.min_scale_confidence) {
+            return Err(format!(
+                "objects.min_scale_confidence must be in [0, 1], got {}",
+                self.min_scale_confidence
+            ));
+        }
+        if !(self.gauge_tolerance.is_finite() && self.gauge_tolerance > 0.0) {
+            return Err(format!(
+                "objects.gauge_tolerance must be finite and > 0, got {}",
+                self.gauge_tolerance
             ));
         }
         if !(0.0..=1.0).contains(&self.min_rigid_iou) {

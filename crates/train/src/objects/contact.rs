@@ -59,12 +59,31 @@ pub fn view_ratio(
         &model.opacity_logits,
         cam,
     )?;
-    let (w, h) = (cam.width as i64, cam.height as i64);
+    let mut ratios = ring_ratios(&depth, background, id_map, object.id, ring);
+    if ratios.len() < min_pixels {
+        return Ok(None);
+    }
+    let k = ((ratios.len() - 1) as f32 * q).round() as usize;
+    ratios.select_nth_unstable_by(k, f32::total_cmp);
+    Ok(Some(ratios[k]))
+}
+
+/// Background depth over the object's depth at the nearest pixel of its mask, for every
+/// background pixel within `ring` pixels of object `id`'s mask (`object`: its depth
+/// rendered alone).
+pub fn ring_ratios(
+    object: &DepthMap,
+    background: &DepthMap,
+    id_map: &[u8],
+    id: u8,
+    ring: u32,
+) -> Vec<f32> {
+    let (w, h) = (object.width as i64, object.height as i64);
     let r = ring.max(1) as i64;
     let mut ratios = Vec::new();
-    for (p, &id) in id_map.iter().enumerate() {
+    for (p, &m) in id_map.iter().enumerate() {
         let zb = background.depth[p];
-        if id != NO_OBJECT || !zb.is_finite() {
+        if m != NO_OBJECT || !zb.is_finite() {
             continue;
         }
         let (x, y) = (p as i64 % w, p as i64 / w);
@@ -76,9 +95,9 @@ pub fn view_ratio(
                     continue;
                 }
                 let k = (v * w + u) as usize;
-                let zo = depth.depth[k];
+                let zo = object.depth[k];
                 let d2 = dx * dx + dy * dy;
-                if id_map[k] == object.id && zo.is_finite() && best.is_none_or(|b| d2 < b.0) {
+                if id_map[k] == id && zo.is_finite() && best.is_none_or(|b| d2 < b.0) {
                     best = Some((d2, zo));
                 }
             }
@@ -87,12 +106,7 @@ pub fn view_ratio(
             ratios.push(zb / zo);
         }
     }
-    if ratios.len() < min_pixels {
-        return Ok(None);
-    }
-    let k = ((ratios.len() - 1) as f32 * q).round() as usize;
-    ratios.select_nth_unstable_by(k, f32::total_cmp);
-    Ok(Some(ratios[k]))
+    ratios
 }
 
 /// Theil–Sen line `y ≈ level + slope·(t − t̄)` through `(t, y)` points; `(level, slope, t̄)`.

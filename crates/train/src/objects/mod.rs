@@ -29,6 +29,7 @@ pub mod config;
 pub mod contact;
 pub mod export;
 pub mod gauge;
+pub mod json_f32;
 pub mod knots;
 pub mod lift;
 pub mod mask_loss;
@@ -36,6 +37,7 @@ pub mod membership;
 pub mod node;
 pub mod place;
 pub mod regauge;
+pub mod scale;
 pub mod select;
 pub mod start;
 pub mod store;
@@ -88,7 +90,7 @@ pub struct RigidObjects {
     /// Name of each object ID, from the scene (objects.json, else the segmentation's
     /// dictionary, else `object-<id>`).
     pub names: Vec<(u8, String)>,
-    /// What [`start`] found per object (empty before it ran, and after a resume).
+    /// What [`start`] found per object (empty before it ran; kept in checkpoints).
     pub start_reports: Vec<start::StartReport>,
     /// Persistent top-k votes and the transfer rule (None with `transfer = false`).
     pub membership: Option<membership::Membership>,

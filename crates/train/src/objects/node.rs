@@ -169,6 +169,7 @@ impl Node for RigidObjects {
         let tensor = |name: &str, len: usize| sec.f32s(name, len);
         let stored = super::store::read(sec.meta("objects"), tensor, |p| sec.problem(p))?;
         self.started = stored.started;
+        self.start_reports = stored.start_reports;
         self.objects = stored.objects;
         self.knot_adam = stored.knot_adam;
         Ok(())

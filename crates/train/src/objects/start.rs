@@ -14,7 +14,7 @@ use scene::Dataset;
 use splat::Rasterizer;
 
 /// What [`start`] found, per object, for the log.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StartReport {
     pub id: u8,
     pub name: String,
@@ -22,18 +22,26 @@ pub struct StartReport {
     pub is_static: bool,
     /// RMS motion of the tracked trajectory under the gauge that makes it move least, and
     /// the object's size (world units, after the gauge).
+    #[serde(with = "super::json_f32")]
     pub residual_motion: f32,
+    #[serde(with = "super::json_f32")]
     pub size: f32,
     /// The static test's measures ([`track::StillEvidence`]).
     pub still: track::StillEvidence,
     pub gaussians: usize,
     /// The gauge applied to the lifted guess of its size and distance.
+    #[serde(with = "super::json_f32")]
     pub scale: f32,
     /// Median IoU of its rigid render with its masks (`Tracker::mask_iou`).
+    #[serde(with = "super::json_f32")]
     pub mask_iou: f32,
     /// Not a rigid body by `objects.min_rigid_iou`: left to the deformation field (no
     /// Gaussians, no trajectory of its own).
     pub left_to_field: bool,
+    /// The readings of its gauge (`scale.rs`) and the choice made from them, for a moving
+    /// object.
+    pub cues: Option<super::scale::ScaleCues>,
+    pub gauge: Option<super::scale::GaugeChoice>,
 }
 
 /// The static background's camera depth in every training view (δ = 0: the background
@@ -173,12 +181,20 @@ pub fn start(
         let id = *id;
         let name = node.name_of(id);
         let size = median(seen.iter().map(|s| s.size).collect()) * f.scale;
-        let left_to_field = !f.is_static && f.mask_iou < node.cfg.min_rigid_iou;
-        if left_to_field {
+        let not_rigid = !f.is_static && f.mask_iou < node.cfg.min_rigid_iou;
+        let confidence = f.gauge.map_or(1.0, |g| g.confidence);
+        let unplaced = !f.is_static && confidence < node.cfg.min_scale_confidence;
+        let left_to_field = not_rigid || unplaced;
+        if not_rigid {
             tracing::warn!(object = %name, mask_iou = f.mask_iou,
                 min_rigid_iou = node.cfg.min_rigid_iou,
                 "not a rigid body: one rigid shape covers its masks with a median IoU below \
                  objects.min_rigid_iou, so the deformation field keeps it");
+        } else if unplaced {
+            tracing::warn!(object = %name, confidence,
+                min_scale_confidence = node.cfg.min_scale_confidence,
+                "no trustworthy depth: too few of its gauge's cues agree \
+                 (objects.min_scale_confidence), so the deformation field keeps it");
         } else {
             state.append_object(&f.model, id);
             tracing::info!(object = %name, sightings = seen.len(), is_static = f.is_static,
@@ -197,6 +213,8 @@ pub fn start(
             scale: f.scale,
             mask_iou: f.mask_iou,
             left_to_field,
+            cues: f.cues,
+            gauge: f.gauge,
         });
         if left_to_field {
             continue;

@@ -1,10 +1,12 @@
 //! The rigid objects in a checkpoint's `state.safetensors`: metadata `objects` (JSON: whether
-//! they started, and per object its ID, name, static flag and knot count) and per object
+//! they started, per object its ID, name, static flag and knot count, and the start's
+//! report on every object it saw, decisions and evidence) and per object
 //! slot `s` the tensors `objects.s.times [K]`, `.translations [K, 3]`, `.rotations [K, 4]`
 //! and the knots' Adam moments and steps. The per-Gaussian object column is the checkpoint's
 //! `object` tensor (written by `checkpoint`).
 
 use super::knots::KnotAdam;
+use super::start::StartReport;
 use super::trajectory::Trajectory;
 use super::{RigidObject, RigidObjects};
 use crate::adam::Adam;
@@ -14,6 +16,10 @@ use serde::{Deserialize, Serialize};
 struct Meta {
     started: bool,
     objects: Vec<ObjectMeta>,
+    /// What the start found per object, its decisions and their evidence (absent in
+    /// checkpoints written before it was kept).
+    #[serde(default)]
+    start: Vec<StartReport>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -39,6 +45,7 @@ pub fn metadata(node: &RigidObjects) -> String {
                 knots: o.trajectory.len(),
             })
             .collect(),
+        start: node.start_reports.clone(),
     };
     serde_json::to_string(&m).expect("plain data serializes")
 }
@@ -70,6 +77,7 @@ pub fn write_tensors(node: &RigidObjects, put: &mut impl FnMut(String, Vec<usize
 /// What a checkpoint holds of the objects.
 pub struct Stored {
     pub started: bool,
+    pub start_reports: Vec<StartReport>,
     pub objects: Vec<RigidObject>,
     pub knot_adam: Vec<KnotAdam>,
 }
@@ -84,6 +92,7 @@ pub fn read<E>(
     let Some(text) = meta else {
         return Ok(Stored {
             started: false,
+            start_reports: Vec::new(),
             objects: Vec::new(),
             knot_adam: Vec::new(),
         });
@@ -136,6 +145,7 @@ pub fn read<E>(
     }
     Ok(Stored {
         started: m.started,
+        start_reports: m.start,
         objects,
         knot_adam,
     })

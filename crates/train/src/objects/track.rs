@@ -14,6 +14,7 @@ use super::gauge;
 use super::knots::KnotAdam;
 use super::lift::{self, DepthMap};
 use super::place::{self, NO_OBJECT};
+use super::scale::{self, GaugeChoice, ScaleCues};
 use super::trajectory::{Pose, Trajectory, TrajectoryGrad};
 use super::{ObjectsConfig, RigidObject};
 use crate::adam::{Adam, AdamHyper};
@@ -97,24 +98,32 @@ pub struct Tracker<'a> {
     scale: f32,
     residual_motion: f32,
     still: StillEvidence,
+    /// The readings of the gauge and the choice made from them, for a moving object
+    /// ([`Self::scale_cues`], [`scale::choose`]).
+    cues: Option<ScaleCues>,
+    gauge: Option<GaugeChoice>,
 }
 
 /// What the static test measured ([`Tracker::still_scale`]), logged and kept in the start
 /// report so a wrong decision can be traced to the criterion that made it.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StillEvidence {
     /// RMS motion of its centroid under the least-motion gauge as the cameras see it,
     /// across the image, over its size there (`Tracker::image_motion`; static below
     /// `static_image_motion`).
+    #[serde(with = "super::json_f32")]
     pub motion: f32,
     /// Largest rotation from the first knot, degrees.
+    #[serde(with = "super::json_f32")]
     pub angle_deg: f32,
     /// RMS displacement of its Gaussians by the rotation alone, over its extent (a turn
     /// counts when both this reaches `static_motion` and the angle `static_angle_deg`).
+    #[serde(with = "super::json_f32")]
     pub turn: f32,
     /// `|ln(ring ratio / gauge)|`: how far in front of or behind the scene around its
     /// silhouette the still copy would stand (static below `ln static_ring_tolerance`);
     /// None when no view sees a background around it.
+    #[serde(with = "super::json_f32::option")]
     pub ring_offset: Option<f32>,
 }
 
@@ -360,6 +369,8 @@ impl<'a> Tracker<'a> {
             scale: 1.0,
             residual_motion: 0.0,
             still: StillEvidence::default(),
+            cues: None,
+            gauge: None,
         }
     }
 
@@ -512,7 +523,43 @@ impl<'a> Tracker<'a> {
     /// view's reading; one view's surroundings are a noisy measure, all views' less so.
     pub fn ring_gauge(&mut self) {
         let Some(r) = self.ring_ratio() else { return };
-        let s = r.clamp(0.5, 2.0);
+        self.apply_gauge(r.clamp(0.5, 2.0));
+    }
+
+    /// Every view's readings of the gauge (`scale.rs`), the object rendered alone in each
+    /// view that sees a background, reduced over the views.
+    pub fn scale_cues(&mut self) -> Result<ScaleCues, splat::SplatError> {
+        let views = self.views;
+        let c = centroid(&self.model.means);
+        let mut out = Vec::with_capacity(views.len());
+        for v in views {
+            let Some(bg) = v.background else { continue };
+            self.place_at(v.time);
+            let d = &self.deformed;
+            let object = lift::render_depth(
+                &mut self.raster,
+                &d.means,
+                &d.quats,
+                &d.scales,
+                &self.model.opacity_logits,
+                v.cam,
+            )?;
+            let at = self.object.trajectory.pose(v.time).apply(c);
+            let depths = scale::ViewDepths {
+                time: v.time,
+                object: &object,
+                background: bg,
+                id_map: v.id_map,
+                centroid_depth: v.cam.to_camera(at)[2],
+            };
+            let (q, ring) = (self.cfg.scale_quantile, self.cfg.ring_px);
+            out.push(scale::view_cues(&depths, self.object.id, q, ring));
+        }
+        Ok(ScaleCues::gather(&out))
+    }
+
+    /// Scales the object about its views' cameras by `s` (its images do not change).
+    pub fn apply_gauge(&mut self, s: f32) {
         let centres: Vec<[f32; 3]> = self.views.iter().map(|v| v.cam.center()).collect();
         gauge::apply_scale(&mut self.model, &mut self.object.trajectory, &centres, s);
         self.scale *= s;
@@ -609,6 +656,8 @@ impl<'a> Tracker<'a> {
             residual_motion: self.residual_motion,
             still: self.still,
             mask_iou,
+            cues: self.cues,
+            gauge: self.gauge,
         })
     }
 }
@@ -668,6 +717,13 @@ pub fn fit(
         }
     }
     let (_, mut t) = best.expect("at least one thickness (validated)");
+    let cues = t.scale_cues()?;
+    let choice = scale::choose(&cues, cfg.gauge, cfg.gauge_tolerance);
+    tracing::debug!(object = name, ?cues, ?choice, "scale cues");
+    if choice.ln_factor != 0.0 {
+        t.apply_gauge(choice.ln_factor.exp()); // (s = 1 would round the poses)
+    }
+    (t.cues, t.gauge) = (Some(cues), Some(choice));
     if cfg.ring_gauge {
         t.ring_gauge();
     }
@@ -693,6 +749,9 @@ pub struct Tracked {
     pub still: StillEvidence,
     /// How well the rigid fit covers its masks ([`Tracker::mask_iou`]).
     pub mask_iou: f32,
+    /// The readings of its gauge and the choice made from them (a moving object).
+    pub cues: Option<ScaleCues>,
+    pub gauge: Option<GaugeChoice>,
 }
 
 /// Largest side of the bounding box of `N·3` points.

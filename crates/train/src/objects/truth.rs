@@ -70,6 +70,9 @@ pub struct ObjectScore {
     pub residual_turn: Option<f32>,
     pub ring_offset: Option<f32>,
     pub mask_iou: Option<f32>,
+    /// The start's readings of the gauge (`scale.rs`) and its choice, a mover's.
+    pub cues: Option<super::scale::ScaleCues>,
+    pub gauge: Option<super::scale::GaugeChoice>,
 }
 
 fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
@@ -155,6 +158,8 @@ pub fn score(
                 residual_turn: report.map(|r| r.still.turn),
                 ring_offset: report.and_then(|r| r.still.ring_offset),
                 mask_iou: report.map(|r| r.mask_iou),
+                cues: report.and_then(|r| r.cues),
+                gauge: report.and_then(|r| r.gauge),
             };
             let local = local_means(state, info.id);
             if let Some(o) = object.filter(|_| !local.is_empty()) {

@@ -112,6 +112,44 @@ pub fn summary_table(r: &Results) -> PaperTable {
     }
 }
 
+/// What the start of each run with rigid objects decided for each object and how well
+/// the object's own node follows it (docs/objects.md, "What follows and what does not"):
+/// one row per (method, object). `None` when no run has rigid objects.
+pub fn objects_table(r: &Results) -> Option<PaperTable> {
+    let mut rows = Vec::new();
+    for (method, m) in r.ordered() {
+        for (object, decision) in &m.rigid_decision_per_object {
+            let get = |map: &std::collections::BTreeMap<String, f64>| fmt(map.get(object).copied());
+            rows.push((
+                format!("{method}: {object}"),
+                vec![
+                    decision.clone(),
+                    get(&m.scale_confidence_per_object),
+                    get(&m.node_share_per_object),
+                    get(&m.follow_in_node_per_object),
+                    get(&m.deformation_follow_per_object),
+                ],
+            ));
+        }
+    }
+    if rows.is_empty() {
+        return None;
+    }
+    let header = [
+        "",
+        "decision",
+        "scale confidence ↑",
+        "node share ↑",
+        "motion followed in node ↑",
+        "motion followed, pooled ↑",
+    ];
+    Some(PaperTable {
+        caption: "Rigid objects: the start's decision and how each node follows".into(),
+        header: header.map(String::from).to_vec(),
+        blocks: vec![Block { title: "", rows }],
+    })
+}
+
 /// The crop series `pick` finds for each method that has it, with the method's name.
 fn crops_of<'a>(
     r: &'a Results,
@@ -122,9 +160,11 @@ fn crops_of<'a>(
         .collect()
 }
 
-/// Every table of a results file: summary, each moving object, then each static object.
+/// Every table of a results file: summary, the rigid objects' decisions (when a run has
+/// them), each moving object, then each static object.
 pub fn all_tables(r: &Results) -> Vec<PaperTable> {
     let mut tables = vec![summary_table(r)];
+    tables.extend(objects_table(r));
     for name in &r.protocol.moving_objects {
         let crops = crops_of(r, |m| m.moving_object_crops.get(name));
         if !crops.is_empty() {
@@ -329,6 +369,27 @@ mod tests {
         let text = tables[1].to_text();
         assert!(text.contains("t=5s"), "{text}");
         assert!(text.lines().any(|l| l.starts_with("R  ")), "{text}");
+    }
+
+    #[test]
+    fn the_objects_table_lists_each_rigid_runs_objects() {
+        let mut r = results(&[("baseline", "B"), ("rigid", "R")]);
+        assert!(objects_table(&r).is_none(), "no run has rigid objects");
+        let m = r.by_method.get_mut("rigid").unwrap();
+        m.rigid_decision_per_object
+            .insert("a".into(), "field".into());
+        m.rigid_decision_per_object
+            .insert("b".into(), "moving".into());
+        m.scale_confidence_per_object.insert("b".into(), 2.0 / 3.0);
+        m.follow_in_node_per_object.insert("b".into(), 0.9);
+        let tables = all_tables(&r);
+        assert_eq!(tables.len(), 5);
+        let rows = &tables[1].blocks[0].rows;
+        let labels: Vec<&str> = rows.iter().map(|(l, _)| l.as_str()).collect();
+        assert_eq!(labels, ["R: a", "R: b"]);
+        assert_eq!(rows[0].1, ["field", "n/a", "n/a", "n/a", "n/a"]);
+        assert_eq!(rows[1].1, ["moving", "0.667", "n/a", "0.900", "0.500"]);
+        assert!(tables[1].to_markdown().contains("| R: b | moving |"));
     }
 
     #[test]

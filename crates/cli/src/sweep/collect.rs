@@ -28,9 +28,26 @@ fn follow(m: &MethodResults) -> Option<f64> {
     mean_of(m.deformation_follow_per_object.values().map(|&v| Some(v)))
 }
 
+fn follow_in_node(m: &MethodResults) -> Option<f64> {
+    mean_of(m.follow_in_node_per_object.values().map(|&v| Some(v)))
+}
+
+fn least_scale_confidence(m: &MethodResults) -> Option<f64> {
+    m.scale_confidence_per_object
+        .values()
+        .copied()
+        .reduce(f64::min)
+}
+
+/// How many objects the rigid start gave `decision`; `None` for runs without rigid objects.
+fn decided(m: &MethodResults, decision: &str) -> Option<f64> {
+    let d = &m.rigid_decision_per_object;
+    (!d.is_empty()).then(|| d.values().filter(|v| *v == decision).count() as f64)
+}
+
 /// The columns of the regularizer's ablation tables (docs/regularizer.md), then the full
-/// frame's, follow and time.
-const METRICS: [Metric; 9] = [
+/// frame's, follow, the rigid objects' (docs/objects.md) and time.
+const METRICS: [Metric; 13] = [
     Metric {
         header: "moving crop PSNR",
         key: "moving_crop_psnr",
@@ -84,6 +101,30 @@ const METRICS: [Metric; 9] = [
         key: "full_lpips",
         decimals: 3,
         get: |m| m.full_frame.lpips,
+    },
+    Metric {
+        header: "follow in node",
+        key: "follow_in_node",
+        decimals: 3,
+        get: follow_in_node,
+    },
+    Metric {
+        header: "least scale confidence",
+        key: "scale_confidence_min",
+        decimals: 2,
+        get: least_scale_confidence,
+    },
+    Metric {
+        header: "objects static",
+        key: "objects_static",
+        decimals: 0,
+        get: |m| decided(m, "static"),
+    },
+    Metric {
+        header: "objects left to the field",
+        key: "objects_field",
+        decimals: 0,
+        get: |m| decided(m, "field"),
     },
 ];
 
@@ -287,6 +328,24 @@ pub(crate) mod tests {
                 .collect(),
             train_s: Some(1.5),
         }
+    }
+
+    #[test]
+    fn rigid_runs_report_their_objects() {
+        let mut m = MethodResults::default();
+        assert_eq!(decided(&m, "static"), None);
+        assert_eq!(least_scale_confidence(&m), None);
+        for (o, d) in [("a", "static"), ("b", "moving"), ("c", "field")] {
+            m.rigid_decision_per_object.insert(o.into(), d.into());
+        }
+        m.scale_confidence_per_object.insert("b".into(), 1.0);
+        m.scale_confidence_per_object.insert("c".into(), 1.0 / 3.0);
+        m.follow_in_node_per_object.insert("b".into(), 0.8);
+        m.follow_in_node_per_object.insert("c".into(), 0.6);
+        assert_eq!(decided(&m, "static"), Some(1.0));
+        assert_eq!(decided(&m, "moving"), Some(1.0));
+        assert_eq!(least_scale_confidence(&m), Some(1.0 / 3.0));
+        assert!((follow_in_node(&m).unwrap() - 0.7).abs() < 1e-12);
     }
 
     #[test]

@@ -1,6 +1,8 @@
 //! `objects.json`: the ground truth of the toycars scenes — each object's
 //! name, text prompt, whether it moves, its local bounding box, and per frame the 4×4
-//! row-major matrix taking its local coordinates to world coordinates.
+//! row-major matrix taking its local coordinates to world coordinates. Articulated objects
+//! add their parts (links): each part's name, parent and box, and per frame each part's
+//! part→world matrix (`part_to_world`), written only by scenes that have parts.
 
 use crate::SceneError;
 use serde::{Deserialize, Serialize};
@@ -24,7 +26,21 @@ pub struct ObjectInfo {
     /// Text prompt for the semantic dictionary.
     pub prompt: String,
     pub moving: bool,
-    /// `[[xmin, ymin, zmin], [xmax, ymax, zmax]]` in object-local coordinates.
+    /// `[[xmin, ymin, zmin], [xmax, ymax, zmax]]` in object-local coordinates; for an
+    /// articulated object the box its parts sweep over the whole sequence.
+    pub bbox_local: [[f32; 3]; 2],
+    /// The parts that turn about joints (empty: the object is rigid).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub parts: Vec<PartInfo>,
+}
+
+/// A part of an articulated object: a rigid link hinged to the body or to another part.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PartInfo {
+    pub name: String,
+    /// Index of the part it hangs from in the object's `parts`; `None`: the body.
+    pub parent: Option<usize>,
+    /// The part's box in its own frame (origin at its joint).
     pub bbox_local: [[f32; 3]; 2],
 }
 
@@ -35,6 +51,10 @@ pub struct ObjectFrame {
     pub time: f32,
     /// One row-major 4×4 local-to-world matrix per object, in `objects` order.
     pub object_to_world: Vec<[[f32; 4]; 4]>,
+    /// Per object, one part→world matrix per part (`objects[i].parts` order); empty when no
+    /// object has parts.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub part_to_world: Vec<Vec<[[f32; 4]; 4]>>,
 }
 
 impl ObjectsFile {
@@ -52,9 +72,13 @@ impl ObjectsFile {
                     ),
                 ));
             }
+            if let Some(msg) = f.parts_problem(fr) {
+                return Err(SceneError::invalid(path, format!("frame {i}: {msg}")));
+            }
             if fr
                 .object_to_world
                 .iter()
+                .chain(fr.part_to_world.iter().flatten())
                 .flatten()
                 .flatten()
                 .any(|v| !v.is_finite())
@@ -67,6 +91,33 @@ impl ObjectsFile {
             }
         }
         Ok(f)
+    }
+
+    /// What is wrong with a frame's part matrices against the objects' parts, if anything.
+    fn parts_problem(&self, fr: &ObjectFrame) -> Option<String> {
+        let any_parts = self.objects.iter().any(|o| !o.parts.is_empty());
+        if fr.part_to_world.is_empty() {
+            return any_parts.then(|| "`part_to_world` is missing".to_string());
+        }
+        if fr.part_to_world.len() != self.objects.len() {
+            return Some(format!(
+                "`part_to_world` has {} entries for {} objects",
+                fr.part_to_world.len(),
+                self.objects.len()
+            ));
+        }
+        self.objects
+            .iter()
+            .zip(&fr.part_to_world)
+            .find(|(o, m)| o.parts.len() != m.len())
+            .map(|(o, m)| {
+                format!(
+                    "{} has {} parts but {} part matrices",
+                    o.name,
+                    o.parts.len(),
+                    m.len()
+                )
+            })
     }
 
     /// Writes pretty JSON atomically.

@@ -140,12 +140,13 @@ fn consistency(run: &Path, iteration: Option<u32>, out_dir: &Path) -> Result<()>
         num(&v["rigidity_rms"])
     )];
     for (name, o) in v["per_object"].as_object().into_iter().flatten() {
-        if let Some(f) = o["follow"].as_f64() {
-            let mut part = format!(
-                "{name} follows {:.0} % of its motion (rigidity RMS {:.4})",
-                100.0 * f,
-                num(&o["rigidity_rms"])
-            );
+        let articulated = o["parts"].is_object();
+        if o["follow"].is_f64() || articulated {
+            let mut part = match o["follow"].as_f64() {
+                Some(f) => format!("{name} follows {:.0} % of its motion", 100.0 * f),
+                None => format!("{name} (its body stands still)"),
+            };
+            part += &format!(" (rigidity RMS {:.4})", num(&o["rigidity_rms"]));
             if let Some(share) = o["node_share"].as_f64() {
                 let pct = |k: &str| {
                     o[k].as_f64()
@@ -159,6 +160,12 @@ fn consistency(run: &Path, iteration: Option<u32>, out_dir: &Path) -> Result<()>
                     100.0 * (1.0 - share),
                     pct("follow_outside")
                 );
+            }
+            for (pname, p) in o["parts"].as_object().into_iter().flatten() {
+                let f = p["follow"]
+                    .as_f64()
+                    .map_or("n/a (still)".into(), |v| format!("{:.0} %", 100.0 * v));
+                part += &format!("; its {pname} follows {f}");
             }
             parts.push(part);
         }

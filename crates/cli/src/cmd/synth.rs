@@ -70,12 +70,14 @@ struct ToycarsArgs {
     /// Example (two cars crossing): --route '0.95,-0.35;-0.9,-0.35' --route 'green-suv=0.45,0.95;0.45,-0.55'
     #[arg(long = "route", value_name = "SPEC", allow_hyphen_values = true)]
     routes: Vec<RouteSpec>,
-    /// Park a rigid prop: KIND@x,y[,yaw], KIND crate or barrel, yaw in degrees
+    /// Park a prop: KIND@x,y[,yaw], KIND crate, barrel or crane, yaw in degrees
     /// (repeatable).
     ///
     /// crate: a wooden toy crate (0.30 long, 0.22 wide, 0.20 high) with different markings
     /// on every face; barrel: an upright red barrel (0.19 across, 0.24 high) with a band,
-    /// a label and a marked lid. Props stand on the ground with their centre at (x, y),
+    /// a label and a marked lid; crane: an articulated wooden crane (a 0.26 × 0.20 base,
+    /// a 0.37 boom hinged 0.14 up that swings ±50° along the yaw once and dips twice, a
+    /// bucket at its tip rocking ±35°), whose parts' poses objects.json records. Props stand on the ground with their centre at (x, y),
     /// get the next mask IDs (3, 4, ...) and the names crate, crate-2, ..., barrel, ...;
     /// move one with --route crate=....
     ///

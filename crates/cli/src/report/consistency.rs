@@ -9,6 +9,7 @@
 //! `--objects` run placed by their trajectories). Both metrics use the same groups and the
 //! same positions.
 
+use super::parts::{PartAccumulator, PartFollow};
 use anyhow::{bail, Context, Result};
 use scene::objects::ObjectsFile;
 use scene::Frame;
@@ -69,6 +70,8 @@ pub struct VehicleMetrics {
     pub node_split: Option<NodeSplit>,
     /// Runs with rigid objects only: what the objects' start decided for each object.
     pub rigid: Vec<RigidStart>,
+    /// Scenes with articulated objects only: each part's follow (`report::parts`).
+    pub parts: Vec<PartFollow>,
 }
 
 /// The start's decision on one object and the confidence of its gauge.
@@ -239,6 +242,7 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
     let mut rigidity = RigidityAccumulator::new();
     let mut split =
         (!loaded.objects().is_empty()).then(|| SplitAccumulator::new(&groups, &loaded.column));
+    let mut parts = PartAccumulator::new(&groups, &objects, pose_ref, &anchor.means);
     for f in &test {
         let pose_t = pose(f)?;
         let deformed = at_time(&mut loaded, f.time);
@@ -264,6 +268,9 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
                 &deformed.means,
             )?;
         }
+        if let Some(p) = &mut parts {
+            p.add_time(f.time, (pose_ref, pose_t), &anchor.means, &deformed.means)?;
+        }
         let attached: Vec<Attached> = tracks
             .iter()
             .map(|t| Attached {
@@ -278,6 +285,7 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
         rigidity: rigidity.report()?,
         node_split: split.map(SplitAccumulator::finish),
         rigid: rigid_starts(&loaded),
+        parts: parts.map_or_else(Vec::new, |p| p.finish(&objects)),
     })
 }
 
@@ -285,7 +293,8 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
 /// (`RUN/eval/consistency.json`): `rms`, `per_time`, `rigidity_rms` (pooled),
 /// `rigidity_per_time`, and per vehicle `rms`, `rms_if_still`, `follow` (`null` for a
 /// vehicle that does not move) and `rigidity_rms`; for runs with rigid objects also
-/// `node_share`, `follow_in_node` and `follow_outside` ([`NodeSplit`]). `None` when the run's scene has no
+/// `node_share`, `follow_in_node` and `follow_outside` ([`NodeSplit`]); for articulated
+/// objects `parts`: per part (`body` first) its `members` and `follow`. `None` when the run's scene has no
 /// `objects.json` (not a toycars scene).
 pub fn named_consistency(run: &Path, iteration: Option<u32>) -> Result<Option<serde_json::Value>> {
     let info = RunInfo::load(run)?;
@@ -298,6 +307,7 @@ pub fn named_consistency(run: &Path, iteration: Option<u32>) -> Result<Option<se
         consistency: r,
         rigidity,
         node_split,
+        parts,
         ..
     } = run_consistency(run, iteration)?;
     let follow_in = |rep: &Option<ConsistencyReport>, id: u8| {
@@ -330,6 +340,17 @@ pub fn named_consistency(run: &Path, iteration: Option<u32>) -> Result<Option<se
                 v["node_share"] = serde_json::json!(share);
                 v["follow_in_node"] = serde_json::json!(follow_in(&ns.in_node, o.object));
                 v["follow_outside"] = serde_json::json!(follow_in(&ns.outside, o.object));
+            }
+            let of_object: serde_json::Map<String, serde_json::Value> = parts
+                .iter()
+                .filter(|p| p.object == o.object)
+                .map(|p| {
+                    let v = serde_json::json!({"members": p.members, "follow": p.follow});
+                    (p.name.clone(), v)
+                })
+                .collect();
+            if !of_object.is_empty() {
+                v["parts"] = serde_json::Value::Object(of_object);
             }
             (name(o.object), v)
         })

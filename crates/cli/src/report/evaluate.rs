@@ -189,6 +189,7 @@ pub fn evaluate_run(
         follow_in_node_per_object: Default::default(),
         rigid_decision_per_object: Default::default(),
         scale_confidence_per_object: Default::default(),
+        follow_per_part: Default::default(),
         renders: renders.0.display().to_string(),
     };
     Ok(RunEval {

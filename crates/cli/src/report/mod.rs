@@ -13,6 +13,7 @@ pub mod inputs;
 pub mod io;
 mod markdown;
 pub mod methods;
+pub mod parts;
 pub mod plots;
 pub mod results;
 pub mod runs;

@@ -105,6 +105,10 @@ pub struct MethodResults {
     /// (`objects::scale`, 0–1).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub scale_confidence_per_object: BTreeMap<String, f64>,
+    /// Scenes with articulated objects: the motion each moving part's Gaussians follow,
+    /// keyed `object/part` (`report::parts`).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub follow_per_part: BTreeMap<String, f64>,
     /// Where the rendered frames came from.
     pub renders: String,
 }

@@ -155,10 +155,20 @@ fn add_consistency(res: &mut MethodResults, run: &Path, set: &EvalSet, notes: &m
         rigidity,
         node_split,
         rigid,
+        parts,
     }) = consistency(run, notes)
     else {
         return;
     };
+    res.follow_per_part = parts
+        .iter()
+        .filter_map(|p| {
+            Some((
+                format!("{}/{}", object_name(set, p.object), p.name),
+                p.follow?,
+            ))
+        })
+        .collect();
     add_rigid_objects(res, set, node_split.as_ref(), &rigid);
     res.deformation_consistency_rms = Some(r.rms);
     res.deformation_consistency_per_object = r

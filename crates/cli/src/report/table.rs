@@ -150,6 +150,36 @@ pub fn objects_table(r: &Results) -> Option<PaperTable> {
     })
 }
 
+/// Articulated objects: the share of each part's true motion that each method's
+/// Gaussians follow (`report::parts`), one column per method.
+pub fn parts_table(r: &Results) -> Option<PaperTable> {
+    let methods: Vec<(&str, &MethodResults)> = r.ordered().collect();
+    let parts: std::collections::BTreeSet<&String> = methods
+        .iter()
+        .flat_map(|(_, m)| m.follow_per_part.keys())
+        .collect();
+    if parts.is_empty() {
+        return None;
+    }
+    let rows = parts
+        .into_iter()
+        .map(|p| {
+            let cells = methods
+                .iter()
+                .map(|(_, m)| fmt(m.follow_per_part.get(p).copied()))
+                .collect();
+            (p.clone(), cells)
+        })
+        .collect();
+    let mut header = vec![String::new()];
+    header.extend(methods.iter().map(|(name, _)| format!("{name} ↑")));
+    Some(PaperTable {
+        caption: "Articulated objects: share of each part's motion its Gaussians follow".into(),
+        header,
+        blocks: vec![Block { title: "", rows }],
+    })
+}
+
 /// The crop series `pick` finds for each method that has it, with the method's name.
 fn crops_of<'a>(
     r: &'a Results,
@@ -161,10 +191,12 @@ fn crops_of<'a>(
 }
 
 /// Every table of a results file: summary, the rigid objects' decisions (when a run has
-/// them), each moving object, then each static object.
+/// them), the articulated objects' parts (when the scene has them), each moving object,
+/// then each static object.
 pub fn all_tables(r: &Results) -> Vec<PaperTable> {
     let mut tables = vec![summary_table(r)];
     tables.extend(objects_table(r));
+    tables.extend(parts_table(r));
     for name in &r.protocol.moving_objects {
         let crops = crops_of(r, |m| m.moving_object_crops.get(name));
         if !crops.is_empty() {
@@ -390,6 +422,29 @@ mod tests {
         assert_eq!(rows[0].1, ["field", "n/a", "n/a", "n/a", "n/a"]);
         assert_eq!(rows[1].1, ["moving", "0.667", "n/a", "0.900", "0.500"]);
         assert!(tables[1].to_markdown().contains("| R: b | moving |"));
+    }
+
+    #[test]
+    fn the_parts_table_has_a_column_per_method() {
+        let mut r = results(&[("baseline", "B"), ("rigid", "R")]);
+        assert!(parts_table(&r).is_none(), "no scene with parts");
+        let m = r.by_method.get_mut("baseline").unwrap();
+        m.follow_per_part.insert("crane/boom".into(), 0.25);
+        m.follow_per_part.insert("crane/bucket".into(), 0.125);
+        let m = r.by_method.get_mut("rigid").unwrap();
+        m.follow_per_part.insert("crane/boom".into(), 0.5);
+        let t = parts_table(&r).unwrap();
+        assert_eq!(t.header, ["", "B ↑", "R ↑"]);
+        let rows = &t.blocks[0].rows;
+        assert_eq!(
+            rows[0],
+            ("crane/boom".into(), vec!["0.250".into(), "0.500".into()])
+        );
+        assert_eq!(
+            rows[1],
+            ("crane/bucket".into(), vec!["0.125".into(), "n/a".into()])
+        );
+        assert_eq!(all_tables(&r).len(), 5);
     }
 
     #[test]

@@ -2,6 +2,7 @@
 //! preset's layout, checked so that every object is named once, moves along a route that
 //! can be parametrized, and stays inside the volume where training seeds its points.
 
+use super::crane::toy_crane;
 use super::model::Model;
 use super::motion::{Layout, Motion, Pose};
 use super::props::{toy_barrel, toy_crate};
@@ -9,7 +10,6 @@ use super::route::{Route, MIN_GAP};
 use super::spec::{AddSpec, PropKind, RouteSpec};
 use super::write::splat_camera;
 use super::ToycarsConfig;
-use crate::objects::apply;
 use crate::SceneError;
 
 /// Half side of the cube every object's box must stay in (the trainer seeds its random
@@ -91,6 +91,7 @@ impl Layout {
         let model: Model = match add.kind {
             PropKind::Crate => toy_crate(name),
             PropKind::Barrel => toy_barrel(name),
+            PropKind::Crane => toy_crane(name),
         };
         self.models.push(model);
         self.motions.push(Motion::Parked(Pose::flat(
@@ -118,14 +119,12 @@ impl Layout {
             })
     }
 
-    /// Every corner of every object's box stays in [−BOUND, BOUND]³ at every frame time.
+    /// Every corner of every object's boxes (links included) stays in [−BOUND, BOUND]³ at every frame time.
     fn check_bounds(&self, frames: usize, origin: &[String]) -> Result<(), SceneError> {
         for (i, model) in self.models.iter().enumerate() {
             for f in 0..frames {
                 let t = f as f32 / (frames - 1) as f32;
-                let m = self.pose(i, t).matrix();
-                for c in 0..8 {
-                    let w = apply(&m, model.corner(c));
+                for w in self.corners(i, t) {
                     if w.iter().any(|v| v.abs() > BOUND) {
                         return Err(SceneError::Argument(format!(
                             "{}: {} leaves [−{BOUND}, {BOUND}]³ at t = {t:.3} (frame {f}): a box corner is at ({:.3}, {:.3}, {:.3})",
@@ -147,9 +146,8 @@ impl Layout {
             for f in 0..frames {
                 let t = f as f32 / (frames - 1) as f32;
                 let cam = splat_camera(width, height, t);
-                let m = self.pose(i, t).matrix();
-                let seen = (0..8).all(|c| {
-                    let p = cam.project(apply(&m, model.corner(c)));
+                let seen = self.corners(i, t).into_iter().all(|w| {
+                    let p = cam.project(w);
                     p.is_some_and(|([u, v], _)| {
                         (0.0..=width as f32).contains(&u) && (0.0..=height as f32).contains(&v)
                     })
@@ -187,15 +185,10 @@ impl Layout {
     }
 
     /// Separating-axis test of two posed boxes on the world z axis and the boxes' own
-    /// horizontal axes: exact for upright boxes, an approximation for tilted ones.
+    /// horizontal axes: exact for upright boxes, an approximation for tilted ones (and for
+    /// articulated objects, whose boxes are tested as their hull).
     fn boxes_meet(&self, i: usize, j: usize, t: f32) -> bool {
-        let posed = |k: usize| {
-            let m = self.pose(k, t).matrix();
-            let corners: Vec<[f32; 3]> = (0..8)
-                .map(|c| apply(&m, self.models[k].corner(c)))
-                .collect();
-            (m, corners)
-        };
+        let posed = |k: usize| (self.pose(k, t).matrix(), self.corners(k, t));
         let ((mi, ci), (mj, cj)) = (posed(i), posed(j));
         // Each box's local x and y (first two columns) flattened onto the ground.
         let mut axes = vec![[0.0, 0.0, 1.0]];

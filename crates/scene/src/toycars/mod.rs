@@ -2,10 +2,13 @@
 //! moving, one moving camera) rebuilt procedurally with ground truth, written in the
 //! D-NeRF layout plus `masks/<file_path>.png` and `objects.json`. Beyond the two
 //! presets, `routes` move any object along waypoints and `adds` place rigid props, so that
-//! object-level rigid motion (turns, jumps, two movers, a non-vehicle) can be tested.
+//! object-level rigid motion (turns, jumps, two movers, a non-vehicle) can be tested, and
+//! an articulated crane (`joints`) whose boom and bucket turn with known angles.
 
+mod crane;
 mod custom;
 mod geometry;
+mod joints;
 mod model;
 mod motion;
 mod props;

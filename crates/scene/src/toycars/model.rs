@@ -1,8 +1,10 @@
 //! A rigid object as the ray caster sees it (a vehicle or a prop): parts (boxes and
 //! cylinders) with materials, its local bounding box, and the surface colour of each
 //! material. Local frame: x forward, y left, z up, origin on the ground under the centre.
+//! An articulated model adds links (`joints`): parts that turn about joints over time.
 
 use super::geometry::V3;
+use super::joints::Link;
 use super::props::{barrel, wood};
 use super::vehicles::{livery_color, tire, Livery};
 
@@ -56,8 +58,11 @@ pub struct Model {
     pub name: String,
     pub prompt: &'static str,
     pub parts: Vec<Part>,
+    /// The box of `parts` (the body; links have their own).
     pub bbox_lo: V3,
     pub bbox_hi: V3,
+    /// Links hinged to the body or to each other; empty for a rigid model.
+    pub links: Vec<Link>,
 }
 
 impl Model {
@@ -70,6 +75,7 @@ impl Model {
             parts,
             bbox_lo,
             bbox_hi,
+            links: Vec::new(),
         }
     }
 

@@ -9,10 +9,12 @@
 //! monocular setting in which deformable 3DGS struggles (paper, Sec. 1 and 4).
 
 use super::geometry::{normalize, sub, V3};
+use super::joints::link_matrices;
 use super::model::Model;
 use super::route::Route;
 use super::vehicles::{green_suv, white_suv, yellow_sedan};
 use super::Preset;
+use crate::objects::apply;
 
 /// Half side of the square ground mat.
 pub const GROUND_HALF: f32 = 1.25;
@@ -124,8 +126,26 @@ impl Layout {
         }
     }
 
+    /// Whether object `i` moves: along a route or the drive, or any of its joints.
     pub fn is_moving(&self, i: usize) -> bool {
         !matches!(self.motions[i], Motion::Parked(_))
+            || self.models[i].links.iter().any(|l| l.moves())
+    }
+
+    /// Link→world matrices of object `i`'s links at `t` (empty for a rigid object).
+    pub fn link_poses(&self, i: usize, t: f32) -> Vec<[[f32; 4]; 4]> {
+        link_matrices(&self.models[i].links, &self.pose(i, t).matrix(), t)
+    }
+
+    /// World corners of object `i`'s boxes at `t`: the body's eight, then each link's.
+    pub fn corners(&self, i: usize, t: f32) -> Vec<V3> {
+        let model = &self.models[i];
+        let m = self.pose(i, t).matrix();
+        let mut out: Vec<V3> = (0..8).map(|c| apply(&m, model.corner(c))).collect();
+        for (link, lm) in model.links.iter().zip(self.link_poses(i, t)) {
+            out.extend((0..8).map(|c| apply(&lm, link.model.corner(c))));
+        }
+        out
     }
 }
 

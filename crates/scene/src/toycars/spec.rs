@@ -3,7 +3,7 @@
 //!
 //! - route: `[NAME=]P;P;...` (≥ 2 waypoints), `P = x,y[,z][@yaw[,pitch,roll]]`, world
 //!   units and degrees;
-//! - add: `KIND@x,y[,yaw]`, KIND `crate` or `barrel`.
+//! - add: `KIND@x,y[,yaw]`, KIND `crate`, `barrel` or `crane` (articulated).
 
 use crate::SceneError;
 use std::str::FromStr;
@@ -32,6 +32,8 @@ pub enum PropKind {
     Crate,
     /// An upright striped toy barrel.
     Barrel,
+    /// A wooden toy crane whose boom and bucket turn (articulated, `joints`).
+    Crane,
 }
 
 impl PropKind {
@@ -39,11 +41,13 @@ impl PropKind {
         match self {
             PropKind::Crate => "crate",
             PropKind::Barrel => "barrel",
+            PropKind::Crane => "crane",
         }
     }
 }
 
-/// A parsed `--add`: a parked object of `kind` at `(x, y)` on the ground, heading `yaw_deg`.
+/// A parsed `--add`: a parked object of `kind` at `(x, y)` on the ground, heading `yaw_deg`
+/// (a crane's boom and bucket still move about their joints).
 #[derive(Clone, Debug, PartialEq)]
 pub struct AddSpec {
     pub kind: PropKind,
@@ -141,11 +145,12 @@ impl FromStr for AddSpec {
         let kind = match kind.trim().to_ascii_lowercase().as_str() {
             "crate" => PropKind::Crate,
             "barrel" => PropKind::Barrel,
+            "crane" => PropKind::Crane,
             k => {
                 return Err(bad(
                     "--add",
                     text,
-                    format!("unknown kind `{k}` (crate or barrel)"),
+                    format!("unknown kind `{k}` (crate, barrel or crane)"),
                 ))
             }
         };

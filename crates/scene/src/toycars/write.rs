@@ -1,10 +1,11 @@
 //! Writing a toycars scene: per-frame RGBA image and mask, then `transforms_*.json`
 //! (D-NeRF: camera-to-world in OpenGL axes) and `objects.json`.
 
+use super::joints::swept_box;
 use super::motion::{camera_pose, Layout, Motion, CAMERA_ANGLE_X};
 use super::render::{render, Placed, RayCamera, World};
 use super::{frame_key, ToycarsConfig};
-use crate::objects::{ObjectFrame, ObjectInfo, ObjectsFile};
+use crate::objects::{ObjectFrame, ObjectInfo, ObjectsFile, PartInfo};
 use crate::{mask_path, save_mask, save_rgba_png, MaskU8, SceneError};
 use serde_json::json;
 use std::path::Path;
@@ -14,6 +15,8 @@ pub struct FrameRecord {
     index: usize,
     time: f32,
     object_to_world: Vec<[[f32; 4]; 4]>,
+    /// Per object, its links' link→world matrices (empty for rigid objects).
+    part_to_world: Vec<Vec<[[f32; 4]; 4]>>,
 }
 
 fn focal(width: u32) -> f32 {
@@ -53,13 +56,18 @@ pub fn render_frame(
     let poses: Vec<[[f32; 4]; 4]> = (0..layout.models.len())
         .map(|i| layout.pose(i, t).matrix())
         .collect();
-    let objects = layout
-        .models
-        .iter()
-        .zip(&poses)
-        .enumerate()
-        .map(|(i, (v, m))| Placed::new(v, i as u8, m))
+    let links: Vec<Vec<[[f32; 4]; 4]>> = (0..layout.models.len())
+        .map(|i| layout.link_poses(i, t))
         .collect();
+    // A link is drawn as a model of its own, posed by its link→world matrix, under the
+    // object's mask ID.
+    let mut objects = Vec::new();
+    for (i, (v, m)) in layout.models.iter().zip(&poses).enumerate() {
+        objects.push(Placed::new(v, i as u8, m));
+        for (link, lm) in v.links.iter().zip(&links[i]) {
+            objects.push(Placed::new(&link.model, i as u8, lm));
+        }
+    }
     let sun = super::geometry::normalize([0.45, -0.55, 0.85]);
     let world = World {
         objects,
@@ -96,6 +104,7 @@ pub fn render_frame(
         index,
         time: t,
         object_to_world: poses,
+        part_to_world: links,
     })
 }
 
@@ -141,15 +150,31 @@ pub fn write_metadata(
             name: v.name.clone(),
             prompt: v.prompt.to_string(),
             moving: layout.is_moving(i),
-            bbox_local: [v.bbox_lo, v.bbox_hi],
+            bbox_local: swept_box(v, cfg.frames),
+            parts: v
+                .links
+                .iter()
+                .map(|l| PartInfo {
+                    name: l.name.clone(),
+                    parent: l.parent,
+                    bbox_local: [l.model.bbox_lo, l.model.bbox_hi],
+                })
+                .collect(),
         })
         .collect();
+    let has_parts = layout.models.iter().any(|m| !m.links.is_empty());
     let frames = frames
         .iter()
         .map(|fr| ObjectFrame {
             file_path: frame_key(fr.index).1,
             time: fr.time,
             object_to_world: fr.object_to_world.clone(),
+            // Only scenes with parts get the key: the presets' files stay byte-identical.
+            part_to_world: if has_parts {
+                fr.part_to_world.clone()
+            } else {
+                Vec::new()
+            },
         })
         .collect();
     let mut generator = json!({"name": "semdynreg synth toycars", "preset": cfg.preset.name(), "seed": cfg.seed,

@@ -303,6 +303,7 @@ mod tests {
             prompt: String::new(),
             moving: id == 0,
             bbox_local: [[-0.1; 3], [0.1; 3]],
+            parts: Vec::new(),
         };
         let truth = ObjectsFile {
             objects: (0..3).map(info).collect(),
@@ -312,6 +313,7 @@ mod tests {
                     file_path: format!("train/{t}"),
                     time: t,
                     object_to_world: vec![translation(t), translation(2.0), translation(-2.0)],
+                    part_to_world: Vec::new(),
                 })
                 .collect(),
             extra: Default::default(),

@@ -118,6 +118,13 @@ pub fn mask_path(root: &Path, file_path: &str) -> PathBuf {
     root.join("masks").join(format!("{file_path}.png"))
 }
 
+/// Ground-truth part map of a scene with articulated objects (toycars' crane):
+/// `ROOT/parts/<file_path>.png`, per pixel of an articulated object the part it shows (0 the
+/// body, `k + 1` its part `k` in `objects.json`), 255 elsewhere.
+pub fn part_map_path(root: &Path, file_path: &str) -> PathBuf {
+    root.join("parts").join(format!("{file_path}.png"))
+}
+
 /// `ROOT/semantics/<file_path>.png`.
 pub fn semantics_path(root: &Path, file_path: &str) -> PathBuf {
     root.join("semantics").join(format!("{file_path}.png"))

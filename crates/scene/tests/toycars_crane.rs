@@ -1,11 +1,11 @@
 //! The articulated crane (`--add crane@…`): objects.json records its parts and each part's
 //! pose per frame, the recorded poses chain from the body out through the joints, the
-//! rendered boom is where its recorded pose puts it at every frame (and moves while the
-//! body stands still), and a file whose part matrices do not match its parts is refused.
+//! rendered boom is where its recorded pose puts it at every frame (in the ID map and the
+//! part map; it moves while the body stands still), and a file whose part matrices do not match its parts is refused.
 
 use scene::objects::{apply, ObjectsFile};
 use scene::toycars::{generate, Preset, ToycarsConfig};
-use scene::{load_dataset, load_mask, LoadOptions};
+use scene::{load_dataset, load_mask, part_map_path, LoadOptions};
 
 fn crane_scene() -> ToycarsConfig {
     ToycarsConfig {
@@ -61,7 +61,7 @@ fn the_crane_records_and_renders_its_parts() {
     let ds = load_dataset(dir.path(), &LoadOptions::default()).unwrap();
     let mut frames: Vec<_> = ds.all_frames().collect();
     frames.sort_by(|a, b| a.time.total_cmp(&b.time));
-    let mut tips = Vec::new();
+    let (mut tips, mut bucket_seen) = (Vec::new(), false);
     for frame in &frames {
         let rec = objects.frame(&frame.file_path).unwrap();
         assert_eq!(rec.part_to_world.len(), 4);
@@ -86,14 +86,24 @@ fn the_crane_records_and_renders_its_parts() {
             apply(&boom, [0.45, 0.0, 0.035]),
             "bucket hinge",
         );
-        // The boom's top face, seen from above, is crane pixels along its whole length.
+        // The boom's top face, seen from above, is crane pixels along its whole length,
+        // and boom pixels (part 1) in the part map.
         let mask = load_mask(&ds.gt_mask_path(frame)).unwrap();
+        let parts = load_mask(&part_map_path(dir.path(), &frame.file_path)).unwrap();
         for x in [0.08, 0.22, 0.36] {
             let (px, _) = frame.camera.project(apply(&boom, [x, 0.0, 0.069])).unwrap();
             let (col, row) = (px[0].floor() as u32, px[1].floor() as u32);
             let what = format!("{} boom top at x = {x}", frame.file_path);
             assert_eq!(mask.get(row, col), 3, "{what} ({col}, {row})");
+            assert_eq!(parts.get(row, col), 1, "{what} ({col}, {row})");
         }
+        // The part map covers exactly the crane's pixels, and shows its body.
+        for (&id, &part) in mask.data.iter().zip(&parts.data) {
+            assert_eq!(id == 3, part != 255, "id {id} part {part}");
+            assert!(part == 255 || part <= 2);
+        }
+        assert!(parts.data.contains(&0));
+        bucket_seen |= parts.data.contains(&2);
         tips.push(apply(&boom, [0.45, 0.0, 0.07]));
     }
     // The boom swings ±50°: its tip moves by decimetres while the body stands still.
@@ -102,6 +112,7 @@ fn the_crane_records_and_renders_its_parts() {
         .flat_map(|p| tips.iter().map(move |q| (p[0] - q[0]).hypot(p[1] - q[1])))
         .fold(0.0f32, f32::max);
     assert!(reach > 0.5, "tip moves {reach}");
+    assert!(bucket_seen, "the bucket shows in some frame's part map");
 }
 
 /// A file whose frames lack a part's matrix is refused with the object named.

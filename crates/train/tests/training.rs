@@ -400,7 +400,7 @@ fn rigid_objects_survive_densify_and_resume() {
 /// start's report says so.
 #[test]
 fn a_mover_without_an_agreed_depth_is_left_to_the_field() {
-    let mut cfg = common::small_config(30);
+    let mut cfg = common::small_config(80);
     cfg.objects.enabled = true;
     cfg.objects.start_iter = 20;
     (cfg.objects.lift_points, cfg.objects.lift_thickness) = (300, vec![0.25]);
@@ -413,6 +413,7 @@ fn a_mover_without_an_agreed_depth_is_left_to_the_field() {
         t.step().unwrap();
     }
     let node = t.nodes.get::<RigidObjects>().expect("objects started");
+    assert_eq!(node.start_reports.len(), 3, "every object reported");
     for r in &node.start_reports {
         let placed = node.objects.iter().any(|o| o.id == r.id);
         let doubted = !r.is_static && r.gauge.is_some_and(|g| g.confidence < 1.0);
@@ -421,5 +422,43 @@ fn a_mover_without_an_agreed_depth_is_left_to_the_field() {
         if doubted {
             assert_eq!(r.gaussians, 0);
         }
+    }
+}
+
+/// `min_rigid_iou` holds still objects to the same test as movers: an object whose one
+/// rigid shape (under one pose or under its track) covers its masks below it is left to
+/// the deformation field, still or moving, and the start's report says so.
+#[test]
+fn an_object_its_rigid_fit_does_not_cover_is_left_to_the_field_still_or_moving() {
+    let mut cfg = common::small_config(80);
+    cfg.objects.enabled = true;
+    cfg.objects.start_iter = 20;
+    (cfg.objects.lift_points, cfg.objects.lift_thickness) = (300, vec![0.25]);
+    (cfg.objects.track_pose_iters, cfg.objects.track_shape_iters) = (5, 2);
+    cfg.objects.track_refine_iters = 20;
+    cfg.objects.min_rigid_iou = 0.9;
+    // A static test that passes any finite motion: the tiny scene's movers are held still, and
+    // one pose covers their masks badly.
+    cfg.objects.static_image_motion = 1e6;
+    cfg.objects.static_motion = 1e6;
+    cfg.objects.static_ring_tolerance = 1e6;
+    cfg.validate().unwrap();
+    let mut t = Trainer::new(cfg, scene_with_id_maps(), 7).unwrap();
+    for _ in 0..25 {
+        t.step().unwrap();
+    }
+    let node = t.nodes.get::<RigidObjects>().expect("objects started");
+    assert_eq!(node.start_reports.len(), 3, "every object reported");
+    assert!(
+        node.start_reports
+            .iter()
+            .any(|r| r.is_static && r.left_to_field),
+        "a still pose that covers a mover's masks badly goes to the field: {:?}",
+        node.start_reports
+    );
+    for r in &node.start_reports {
+        let placed = node.objects.iter().any(|o| o.id == r.id);
+        assert_eq!(r.left_to_field, r.mask_iou < 0.9, "{r:?}");
+        assert_eq!(placed, !r.left_to_field, "{}", r.name);
     }
 }

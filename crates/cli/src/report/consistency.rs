@@ -242,7 +242,19 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
     let mut rigidity = RigidityAccumulator::new();
     let mut split =
         (!loaded.objects().is_empty()).then(|| SplitAccumulator::new(&groups, &loaded.column));
-    let mut parts = PartAccumulator::new(&groups, &objects, pose_ref, &anchor.means);
+    let mut parts = match objects.objects.iter().any(|o| !o.parts.is_empty()) {
+        true => {
+            let path = scene::part_map_path(&ds.root, &reference.file_path);
+            let map = scene::load_mask(&path)?;
+            let topk = TopKView {
+                ids: &ids,
+                stride: k,
+            };
+            let maps = (&mask.data[..], &map.data[..]);
+            PartAccumulator::new(topk, k, maps, &objects, loaded.model.len())?
+        }
+        false => None,
+    };
     for f in &test {
         let pose_t = pose(f)?;
         let deformed = at_time(&mut loaded, f.time);

@@ -1,21 +1,15 @@
 //! Per-part follow of articulated objects (scenes whose `objects.json` lists `parts`, such
-//! as the toycars crane): each object's group is split by the part that holds each member
-//! at `t_ref`, and every part is scored against its own true motion with the same metric
-//! as the whole object (`train::regularizer::consistency`, `follow = 1 − rms/rms_if_still`).
-//!
-//! A member belongs to the part whose box (in the part's frame at `t_ref`, grown by
-//! [`MARGIN`] since Gaussians sit on and just off the surface) holds its anchor, the
-//! nearest such box where several do; members in no part's box belong to the body.
+//! as the toycars crane): the Gaussians a render at `t_ref` draws inside each part's
+//! pixels of the ground-truth part map (`parts/<file_path>.png`) form that part's group,
+//! chosen as the objects' groups are (the paper's top-k, `train::regularizer::grouping`),
+//! and every part is scored against its own true motion with the same metric as a whole
+//! object (`train::regularizer::consistency`, `follow = 1 − rms/rms_if_still`).
 
 use anyhow::Result;
 use scene::objects::{ObjectFrame, ObjectsFile};
-use train::objects::truth::inv_apply;
-use train::regularizer::{ConsistencyAccumulator, ObjectGroups, ObjectTrack};
+use train::regularizer::{ConsistencyAccumulator, ObjectGroups, ObjectTrack, TopKView};
 
-/// How far outside a part's box (world units) a member still counts as the part's.
-pub const MARGIN: f32 = 0.01;
-
-/// One part's members of an object's group.
+/// One part's members.
 struct PartMembers {
     object: u8,
     /// The object's index in `objects.json`.
@@ -40,27 +34,37 @@ pub struct PartAccumulator {
     acc: Vec<ConsistencyAccumulator>,
 }
 
-/// How far `p` lies outside the box `b` (0 inside).
-fn outside(b: &[[f32; 3]; 2], p: [f32; 3]) -> f32 {
-    let d: [f32; 3] = std::array::from_fn(|k| (b[0][k] - p[k]).max(p[k] - b[1][k]).max(0.0));
-    (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
-}
+/// One slot per (articulated object, part) seen in the maps: `(object index, part)`.
+type Slot = (usize, Option<usize>);
 
-/// The part holding world point `a` at the reference frame (`None`: the body).
-fn part_of(
-    object: &scene::objects::ObjectInfo,
-    mats: &[[[f32; 4]; 4]],
-    a: [f32; 3],
-) -> Option<usize> {
-    object
-        .parts
+/// The ID map of parts: each pixel of an articulated object gets the index of its
+/// (object, part) slot, every other pixel 255.
+fn slot_map(ids: &[u8], parts: &[u8], objects: &ObjectsFile) -> (Vec<u8>, Vec<Slot>) {
+    let mut slots: Vec<Slot> = Vec::new();
+    let map = ids
         .iter()
-        .zip(mats)
-        .enumerate()
-        .map(|(k, (p, m))| (k, outside(&p.bbox_local, inv_apply(m, a))))
-        .filter(|&(_, d)| d <= MARGIN)
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map(|(k, _)| k)
+        .zip(parts)
+        .map(|(&id, &p)| {
+            let index = objects.objects.iter().position(|o| o.id == id);
+            let Some(index) = index.filter(|&i| !objects.objects[i].parts.is_empty()) else {
+                return scene::MASK_BACKGROUND;
+            };
+            let part = match usize::from(p) {
+                0 => None,
+                k if k <= objects.objects[index].parts.len() => Some(k - 1),
+                _ => return scene::MASK_BACKGROUND,
+            };
+            let slot = slots
+                .iter()
+                .position(|&s| s == (index, part))
+                .unwrap_or_else(|| {
+                    slots.push((index, part));
+                    slots.len() - 1
+                });
+            u8::try_from(slot).unwrap_or(scene::MASK_BACKGROUND)
+        })
+        .collect();
+    (map, slots)
 }
 
 /// The part→world matrix of `part` (the body's object→world for `None`).
@@ -72,49 +76,42 @@ fn matrix(frame: &ObjectFrame, index: usize, part: Option<usize>) -> &[[f32; 4];
 }
 
 impl PartAccumulator {
-    /// Splits every group of an object with parts; `None` when no group has one.
+    /// The parts' groups from a render's top-k at `t_ref` (`use_k` of them), the reference
+    /// frame's ID map `ids` and part map `parts`; `None` when no articulated object shows.
     pub fn new(
-        groups: &ObjectGroups,
+        topk: TopKView<'_>,
+        use_k: usize,
+        (ids, parts): (&[u8], &[u8]),
         objects: &ObjectsFile,
-        pose_ref: &ObjectFrame,
-        anchor: &[f32],
-    ) -> Option<Self> {
+        n_gaussians: usize,
+    ) -> Result<Option<Self>> {
+        let (map, slots) = slot_map(ids, parts, objects);
+        if slots.is_empty() {
+            return Ok(None);
+        }
+        let mut groups = ObjectGroups::new();
+        groups.build(topk, use_k, &map, n_gaussians)?;
         let groups = groups.iter().map(|g| (g.object, g.members));
-        Self::from_groups(groups, objects, pose_ref, anchor)
+        Ok(Self::from_groups(groups, &slots, objects))
     }
 
-    /// [`Self::new`] from `(object, members)` pairs.
+    /// [`Self::new`] from `(slot, members)` pairs.
     fn from_groups<'a>(
         groups: impl Iterator<Item = (u8, &'a [u32])>,
+        slots: &[Slot],
         objects: &ObjectsFile,
-        pose_ref: &ObjectFrame,
-        anchor: &[f32],
     ) -> Option<Self> {
-        let mut parts = Vec::new();
-        for (object, members) in groups {
-            let Some(index) = objects.objects.iter().position(|o| o.id == object) else {
-                continue;
-            };
-            let info = &objects.objects[index];
-            if info.parts.is_empty() {
-                continue;
-            }
-            let mats = &pose_ref.part_to_world[index];
-            let mut split: Vec<Vec<u32>> = vec![Vec::new(); info.parts.len() + 1];
-            for &m in members {
-                let a = std::array::from_fn(|c| anchor[3 * m as usize + c]);
-                split[part_of(info, mats, a).map_or(0, |k| k + 1)].push(m);
-            }
-            for (slot, members) in split.into_iter().enumerate() {
-                let part = slot.checked_sub(1);
-                parts.push(PartMembers {
-                    object,
+        let parts: Vec<PartMembers> = groups
+            .filter_map(|(slot, members)| {
+                let &(index, part) = slots.get(usize::from(slot))?;
+                Some(PartMembers {
+                    object: objects.objects[index].id,
                     index,
                     part,
-                    members,
-                });
-            }
-        }
+                    members: members.to_vec(),
+                })
+            })
+            .collect();
         (!parts.is_empty()).then(|| Self {
             acc: vec![ConsistencyAccumulator::new(); parts.len()],
             parts,
@@ -177,65 +174,63 @@ mod tests {
         ]
     }
 
-    /// Points go to the part whose box holds them (within the margin), the nearer of two,
-    /// and to the body otherwise.
-    #[test]
-    fn members_go_to_the_part_that_holds_them() {
-        let part = |name: &str| PartInfo {
-            name: name.into(),
-            parent: None,
-            bbox_local: [[0.0; 3], [0.1; 3]],
-        };
-        let object = ObjectInfo {
-            id: 4,
-            name: "crane".into(),
-            prompt: String::new(),
-            moving: true,
-            bbox_local: [[-1.0; 3], [1.0; 3]],
-            parts: vec![part("boom"), part("bucket")],
-        };
-        let mats = [shifted(0.5), shifted(0.6)];
-        assert_eq!(part_of(&object, &mats, [0.55, 0.05, 0.05]), Some(0));
-        // Where the grown boxes overlap, the box the point is inside wins.
-        assert_eq!(part_of(&object, &mats, [0.595, 0.05, 0.05]), Some(0));
-        assert_eq!(part_of(&object, &mats, [0.605, 0.05, 0.05]), Some(1));
-        // Just past the boom's top but within the margin; past the bucket's far end.
-        assert_eq!(part_of(&object, &mats, [0.55, 0.05, 0.105]), Some(0));
-        assert_eq!(part_of(&object, &mats, [0.705, 0.05, 0.05]), Some(1));
-        assert_eq!(part_of(&object, &mats, [0.3, 0.05, 0.05]), None);
-        assert_eq!(part_of(&object, &mats, [0.55, 0.05, 0.2]), None);
-    }
-
-    /// A body that stands still, a boom that slides 0.2 along x and a bucket that stays
-    /// behind: members that ride with the boom follow all of its motion, the bucket's none,
-    /// and the body has no motion to follow.
-    #[test]
-    fn each_part_is_scored_against_its_own_motion() {
+    /// A crane (ID 2, parts boom and bucket) beside a rigid car (ID 0), at two frames: the
+    /// body stands still, the boom slides 0.2 along x, the bucket with it.
+    fn scene() -> ObjectsFile {
         let part = |name: &str, parent| PartInfo {
             name: name.into(),
             parent,
             bbox_local: [[0.0; 3], [0.1; 3]],
         };
-        let objects = ObjectsFile {
-            objects: vec![ObjectInfo {
-                id: 2,
-                name: "crane".into(),
-                prompt: String::new(),
-                moving: true,
-                bbox_local: [[-1.0; 3], [1.0; 3]],
-                parts: vec![part("boom", None), part("bucket", Some(0))],
-            }],
+        let info = |id: u8, name: &str, parts: Vec<PartInfo>| ObjectInfo {
+            id,
+            name: name.into(),
+            prompt: String::new(),
+            moving: true,
+            bbox_local: [[-1.0; 3], [1.0; 3]],
+            parts,
+        };
+        ObjectsFile {
+            objects: vec![
+                info(0, "car", Vec::new()),
+                info(
+                    2,
+                    "crane",
+                    vec![part("boom", None), part("bucket", Some(0))],
+                ),
+            ],
             frames: [(0.0, 0.0), (1.0, 0.2)]
                 .iter()
                 .map(|&(time, dx)| ObjectFrame {
                     file_path: format!("test/{time}"),
                     time,
-                    object_to_world: vec![shifted(0.0)],
-                    part_to_world: vec![vec![shifted(0.5 + dx), shifted(0.8 + dx)]],
+                    object_to_world: vec![shifted(dx), shifted(0.0)],
+                    part_to_world: vec![Vec::new(), vec![shifted(0.5 + dx), shifted(0.8 + dx)]],
                 })
                 .collect(),
             extra: Default::default(),
-        };
+        }
+    }
+
+    /// Pixels of the crane get one slot per part they show, in order of appearance; the
+    /// car's pixels, the background and part values the object does not have get none.
+    #[test]
+    fn each_shown_part_gets_a_slot() {
+        let objects = scene();
+        let ids = [0u8, 2, 2, 2, 255, 2, 2];
+        let parts = [0u8, 2, 0, 2, 255, 1, 9];
+        let (map, slots) = slot_map(&ids, &parts, &objects);
+        assert_eq!(map, [255, 0, 1, 0, 255, 2, 255]);
+        assert_eq!(slots, [(1, Some(1)), (1, None), (1, Some(0))]);
+        let (map, slots) = slot_map(&[0, 255], &[0, 255], &objects);
+        assert!(slots.is_empty() && map == [255, 255]);
+    }
+
+    /// Members that ride with the boom follow all of its motion, the bucket's (left behind)
+    /// none, and the still body has no motion to follow.
+    #[test]
+    fn each_part_is_scored_against_its_own_motion() {
+        let objects = scene();
         // Members 0, 1 on the body, 2, 3 on the boom, 4 on the bucket.
         let anchor = [
             -0.2, 0.0, 0.0, 0.1, 0.0, 0.0, 0.52, 0.05, 0.05, 0.58, 0.02, 0.08, 0.85, 0.05, 0.05,
@@ -243,10 +238,11 @@ mod tests {
         let mut moved = anchor;
         moved[6] += 0.2;
         moved[9] += 0.2;
-        let members = [0u32, 1, 2, 3, 4];
+        let slots = [(1, None), (1, Some(0)), (1, Some(1))];
+        let members: [&[u32]; 3] = [&[0, 1], &[2, 3], &[4]];
+        let groups = (0u8..).zip(members);
+        let mut acc = PartAccumulator::from_groups(groups, &slots, &objects).unwrap();
         let (f0, f1) = (&objects.frames[0], &objects.frames[1]);
-        let groups = std::iter::once((2u8, &members[..]));
-        let mut acc = PartAccumulator::from_groups(groups, &objects, f0, &anchor).unwrap();
         acc.add_time(1.0, (f0, f1), &anchor, &moved).unwrap();
         let got: Vec<(String, usize, Option<f64>)> = acc
             .finish(&objects)
@@ -261,10 +257,5 @@ mod tests {
                 ("bucket".into(), 1, Some(0.0)),
             ]
         );
-        // A scene without parts has nothing to split.
-        let mut rigid = objects.clone();
-        rigid.objects[0].parts.clear();
-        let groups = std::iter::once((2u8, &members[..]));
-        assert!(PartAccumulator::from_groups(groups, &rigid, f0, &anchor).is_none());
     }
 }

@@ -25,6 +25,8 @@ const RGSS: [[f32; 2]; 4] = [
 pub struct Placed<'a> {
     pub model: &'a Model,
     pub id: u8,
+    /// Which part of its object this is: 0 the body, `k + 1` link `k` (the part maps).
+    pub part: u8,
     pub rot: [V3; 3],
     pub pos: V3,
 }
@@ -34,6 +36,7 @@ impl<'a> Placed<'a> {
         Self {
             model,
             id,
+            part: 0,
             rot: [0, 1, 2].map(|r| [m[r][0], m[r][1], m[r][2]]),
             pos: [m[0][3], m[1][3], m[2][3]],
         }
@@ -70,6 +73,7 @@ pub struct World<'a> {
 struct Hit {
     t: f32,
     id: u8,
+    part: u8,
     normal: V3,
     color: V3,
     spec: f32,
@@ -120,6 +124,7 @@ impl World<'_> {
                 best = Some(Hit {
                     t,
                     id: obj.id,
+                    part: obj.part,
                     normal: obj.normal_to_world(n),
                     color,
                     spec,
@@ -134,6 +139,7 @@ impl World<'_> {
                 best = Some(Hit {
                     t,
                     id: MASK_BACKGROUND,
+                    part: MASK_BACKGROUND,
                     normal: [0.0, 0.0, 1.0],
                     color,
                     spec: 0.04,
@@ -196,31 +202,46 @@ impl RayCamera {
     }
 }
 
-/// Renders straight-alpha RGBA (`H·W·4`, alpha = sample coverage) and the instance mask
-/// (`H·W`, majority vote over the samples, ties to the smaller ID).
+/// One rendered frame: straight-alpha RGBA (`H·W·4`, alpha = sample coverage), the
+/// instance mask (`H·W`, majority vote over the samples, ties to the smaller ID) and the
+/// part map (`H·W`: the majority part among the samples that hit the mask's object, 0 the
+/// body, `k + 1` link `k`; background 255).
+pub struct Rendered {
+    pub rgba: Vec<u8>,
+    pub ids: Vec<u8>,
+    pub parts: Vec<u8>,
+}
+
 pub fn render(
     world: &World,
     cam: &RayCamera,
     width: u32,
     height: u32,
     supersample: bool,
-) -> (Vec<u8>, Vec<u8>) {
+) -> Rendered {
     let (w, h) = (width as usize, height as usize);
     let mut rgba = vec![0u8; w * h * 4];
     let mut mask = vec![MASK_BACKGROUND; w * h];
+    let mut parts = vec![MASK_BACKGROUND; w * h];
     let offsets: &[[f32; 2]] = if supersample { &RGSS } else { &[[0.0, 0.0]] };
     rgba.par_chunks_mut(w * 4)
         .zip(mask.par_chunks_mut(w))
+        .zip(parts.par_chunks_mut(w))
         .enumerate()
-        .for_each(|(row, (out, ids))| {
+        .for_each(|(row, ((out, ids), prt))| {
             for col in 0..w {
-                let (px, id) =
+                let (px, id, part) =
                     render_pixel(world, cam, col as f32 + 0.5, row as f32 + 0.5, offsets);
                 out[col * 4..col * 4 + 4].copy_from_slice(&px);
                 ids[col] = id;
+                prt[col] = part;
             }
         });
-    (rgba, mask)
+    Rendered {
+        rgba,
+        ids: mask,
+        parts,
+    }
 }
 
 fn render_pixel(
@@ -229,10 +250,11 @@ fn render_pixel(
     u: f32,
     v: f32,
     offsets: &[[f32; 2]],
-) -> ([u8; 4], u8) {
+) -> ([u8; 4], u8, u8) {
     let mut sum = [0.0f32; 3];
     let mut hits = 0usize;
     let mut ids = [MASK_BACKGROUND; 4];
+    let mut parts = [MASK_BACKGROUND; 4];
     for (k, o) in offsets.iter().enumerate() {
         let ray = cam.ray(u + o[0], v + o[1]);
         if let Some(h) = world.trace(&ray) {
@@ -242,6 +264,7 @@ fn render_pixel(
             }
             hits += 1;
             ids[k] = h.id;
+            parts[k] = h.part;
         }
     }
     let n = offsets.len();
@@ -257,7 +280,16 @@ fn render_pixel(
             q(hits as f32 / n as f32),
         ]
     };
-    (px, majority(&ids[..n]))
+    let id = majority(&ids[..n]);
+    // The part of the object the mask shows, from that object's samples only.
+    let of_id: [u8; 4] = std::array::from_fn(|k| {
+        if ids[k] == id {
+            parts[k]
+        } else {
+            MASK_BACKGROUND
+        }
+    });
+    (px, id, majority(&of_id[..n]))
 }
 
 /// Most frequent ID; ties go to the smaller value (vehicles before background).

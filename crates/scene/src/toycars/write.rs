@@ -1,4 +1,5 @@
-//! Writing a toycars scene: per-frame RGBA image and mask, then `transforms_*.json`
+//! Writing a toycars scene: per-frame RGBA image, mask and (with articulated objects)
+//! part map, then `transforms_*.json`
 //! (D-NeRF: camera-to-world in OpenGL axes) and `objects.json`.
 
 use super::joints::swept_box;
@@ -6,7 +7,7 @@ use super::motion::{camera_pose, Layout, Motion, CAMERA_ANGLE_X};
 use super::render::{render, Placed, RayCamera, World};
 use super::{frame_key, ToycarsConfig};
 use crate::objects::{ObjectFrame, ObjectInfo, ObjectsFile, PartInfo};
-use crate::{mask_path, save_mask, save_rgba_png, MaskU8, SceneError};
+use crate::{mask_path, part_map_path, save_mask, save_rgba_png, MaskU8, SceneError};
 use serde_json::json;
 use std::path::Path;
 
@@ -64,8 +65,10 @@ pub fn render_frame(
     let mut objects = Vec::new();
     for (i, (v, m)) in layout.models.iter().zip(&poses).enumerate() {
         objects.push(Placed::new(v, i as u8, m));
-        for (link, lm) in v.links.iter().zip(&links[i]) {
-            objects.push(Placed::new(&link.model, i as u8, lm));
+        for (k, (link, lm)) in v.links.iter().zip(&links[i]).enumerate() {
+            let mut placed = Placed::new(&link.model, i as u8, lm);
+            placed.part = k as u8 + 1;
+            objects.push(placed);
         }
     }
     let sun = super::geometry::normalize([0.45, -0.55, 0.85]);
@@ -86,7 +89,8 @@ pub fn render_frame(
         cx: 0.5 * cfg.width as f32,
         cy: 0.5 * cfg.height as f32,
     };
-    let (rgba, ids) = render(&world, &cam, cfg.width, cfg.height, cfg.supersample);
+    let frame = render(&world, &cam, cfg.width, cfg.height, cfg.supersample);
+    let (rgba, ids) = (frame.rgba, frame.ids);
     let (_, key) = frame_key(index);
     save_rgba_png(
         &out_dir.join(format!("{key}.png")),
@@ -100,12 +104,36 @@ pub fn render_frame(
         data: ids,
     };
     save_mask(&mask_path(out_dir, &key), &mask)?;
+    // Part maps only for scenes with articulated objects (the presets stay as they were).
+    if layout.models.iter().any(|m| !m.links.is_empty()) {
+        let parts = MaskU8 {
+            width: cfg.width,
+            height: cfg.height,
+            data: articulated_only(layout, &mask.data, frame.parts),
+        };
+        save_mask(&part_map_path(out_dir, &key), &parts)?;
+    }
     Ok(FrameRecord {
         index,
         time: t,
         object_to_world: poses,
         part_to_world: links,
     })
+}
+
+/// The part map keeps the pixels of articulated objects (255 elsewhere): rigid objects have
+/// only a body.
+fn articulated_only(layout: &Layout, ids: &[u8], mut parts: Vec<u8>) -> Vec<u8> {
+    for (p, &id) in parts.iter_mut().zip(ids) {
+        let rigid = layout
+            .models
+            .get(usize::from(id))
+            .is_none_or(|m| m.links.is_empty());
+        if rigid {
+            *p = crate::MASK_BACKGROUND;
+        }
+    }
+    parts
 }
 
 /// Camera-to-world in OpenGL axes (D-NeRF `transform_matrix`): the inverse of the

@@ -56,10 +56,10 @@ pub struct ObjectsConfig {
     /// this factor of 1. A camera moving along the object's path cannot otherwise tell a
     /// moving object from a static one at another depth (docs/objects.md).
     pub static_ring_tolerance: f32,
-    /// A moving object whose tracked rigid render covers its masks with a median IoU below
-    /// this (over its views, alpha > ½ against the mask) is not a rigid body (a hand, a
-    /// person): it is left to the deformation field, with a warning saying so. 0 keeps
-    /// every object rigid.
+    /// An object whose tracked rigid render (still or moving) covers its masks with a
+    /// median IoU below this (over its views, alpha > ½ against the mask) is not a rigid
+    /// body (a hand, a person, a crane swinging its boom): it is left to the deformation
+    /// field, with a warning saying so. 0 keeps every object rigid.
     pub min_rigid_iou: f32,
     /// Tracking (time-progressive fitting): iterations of pose fitting per new frame, and of
     /// shape/appearance refinement on already tracked frames after each new frame.

@@ -181,12 +181,14 @@ pub fn start(
         let id = *id;
         let name = node.name_of(id);
         let size = median(seen.iter().map(|s| s.size).collect()) * f.scale;
-        let not_rigid = !f.is_static && f.mask_iou < node.cfg.min_rigid_iou;
+        // Still or moving: a still pose that covers the masks badly is a body whose parts
+        // move (a crane's boom, an arm) as surely as a moving fit that does.
+        let not_rigid = f.mask_iou < node.cfg.min_rigid_iou;
         let confidence = f.gauge.map_or(1.0, |g| g.confidence);
         let unplaced = !f.is_static && confidence < node.cfg.min_scale_confidence;
         let left_to_field = not_rigid || unplaced;
         if not_rigid {
-            tracing::warn!(object = %name, mask_iou = f.mask_iou,
+            tracing::warn!(object = %name, mask_iou = f.mask_iou, is_static = f.is_static,
                 min_rigid_iou = node.cfg.min_rigid_iou,
                 "not a rigid body: one rigid shape covers its masks with a median IoU below \
                  objects.min_rigid_iou, so the deformation field keeps it");

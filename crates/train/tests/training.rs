@@ -462,3 +462,50 @@ fn an_object_its_rigid_fit_does_not_cover_is_left_to_the_field_still_or_moving()
         assert_eq!(placed, !r.left_to_field, "{}", r.name);
     }
 }
+
+/// `static_iou_drop`: an object the motion measures call still stays a mover when one pose
+/// covers its masks worse than its track by more than the drop; the start's report keeps
+/// both IoUs. Without the check (1, the default) the same objects are held still, with the
+/// same evidence.
+#[test]
+fn holding_still_must_not_cost_the_masks_overlap() {
+    let reports = |drop: f32| {
+        let mut cfg = common::small_config(80);
+        cfg.objects.enabled = true;
+        cfg.objects.start_iter = 20;
+        (cfg.objects.lift_points, cfg.objects.lift_thickness) = (300, vec![0.25]);
+        (cfg.objects.track_pose_iters, cfg.objects.track_shape_iters) = (5, 2);
+        cfg.objects.track_refine_iters = 20;
+        // Motion measures that call any finite motion still: the tiny scene's movers
+        // reach the IoU check.
+        cfg.objects.static_image_motion = 1e6;
+        cfg.objects.static_motion = 1e6;
+        cfg.objects.static_ring_tolerance = 1e6;
+        cfg.objects.static_iou_drop = drop;
+        cfg.validate().unwrap();
+        let mut t = Trainer::new(cfg, scene_with_id_maps(), 7).unwrap();
+        for _ in 0..25 {
+            t.step().unwrap();
+        }
+        t.nodes.get::<RigidObjects>().unwrap().start_reports.clone()
+    };
+    let (checked, unchecked) = (reports(0.02), reports(1.0));
+    let mut kept_moving = 0;
+    for (r, u) in checked.iter().zip(&unchecked) {
+        let (Some(tracked), Some(still)) = (r.still.iou_tracked, r.still.iou_still) else {
+            assert!(!r.is_static, "a still object has both IoUs: {r:?}");
+            continue;
+        };
+        assert_eq!(r.is_static, tracked - still <= 0.02, "{r:?}");
+        assert!(u.is_static, "{u:?}");
+        assert_eq!(
+            (u.still.iou_tracked, u.still.iou_still),
+            (Some(tracked), Some(still))
+        );
+        kept_moving += usize::from(!r.is_static);
+    }
+    assert!(
+        kept_moving > 0,
+        "a mover held still loses overlap: {checked:?}"
+    );
+}

@@ -56,6 +56,11 @@ pub struct ObjectsConfig {
     /// this factor of 1. A camera moving along the object's path cannot otherwise tell a
     /// moving object from a static one at another depth (docs/objects.md).
     pub static_ring_tolerance: f32,
+    /// And only if one pose covers its masks about as well as its track does: a still
+    /// object held still loses nothing, a slow mover the measures above missed loses its
+    /// masks' overlap (median IoU, `Tracker::mask_iou`). The object stays a mover when
+    /// holding it still costs more than this much IoU; 1 disables the check.
+    pub static_iou_drop: f32,
     /// An object whose tracked rigid render (still or moving) covers its masks with a
     /// median IoU below this (over its views, alpha > ½ against the mask) is not a rigid
     /// body (a hand, a person, a crane swinging its boom): it is left to the deformation
@@ -120,6 +125,7 @@ impl Default for ObjectsConfig {
             static_motion: 0.25,
             static_angle_deg: 10.0,
             static_ring_tolerance: 1.6,
+            static_iou_drop: 1.0,
             min_rigid_iou: 0.0,
             track_pose_iters: 30,
             track_shape_iters: 10,
@@ -182,6 +188,12 @@ impl ObjectsConfig {
             return Err(format!(
                 "objects.gauge_tolerance must be finite and > 0, got {}",
                 self.gauge_tolerance
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.static_iou_drop) {
+            return Err(format!(
+                "objects.static_iou_drop must be in [0, 1], got {}",
+                self.static_iou_drop
             ));
         }
         if !(0.0..=1.0).contains(&self.min_rigid_iou) {

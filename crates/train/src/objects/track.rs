@@ -125,6 +125,12 @@ pub struct StillEvidence {
     /// None when no view sees a background around it.
     #[serde(with = "super::json_f32::option")]
     pub ring_offset: Option<f32>,
+    /// Median mask IoU of its track, and of one pose held still, when the measures above
+    /// called it still (`static_iou_drop`).
+    #[serde(default, with = "super::json_f32::option")]
+    pub iou_tracked: Option<f32>,
+    #[serde(default, with = "super::json_f32::option")]
+    pub iou_still: Option<f32>,
 }
 
 const HP: AdamHyper = AdamHyper {
@@ -427,6 +433,7 @@ impl<'a> Tracker<'a> {
             angle_deg: angle.to_degrees(),
             turn,
             ring_offset,
+            ..Default::default()
         };
         let placed = ring_offset.is_none_or(|off| off <= c.static_ring_tolerance.ln());
         // A turn counts by how far it moves the object's Gaussians, the yardstick of the
@@ -577,6 +584,31 @@ impl<'a> Tracker<'a> {
         self.scale *= s;
     }
 
+    /// Holds the object still under the gauge `s` (as [`Self::hold_still`]) unless one
+    /// pose covers its masks worse than its track by more than `static_iou_drop`; then the
+    /// track is kept and the object stays a mover. Both IoUs go into the static test's
+    /// evidence either way. Whether it was held.
+    pub fn hold_still_if_it_fits(&mut self, s: f32) -> Result<bool, splat::SplatError> {
+        let tracked = self.mask_iou()?;
+        let saved = (
+            self.model.clone(),
+            self.object.trajectory.clone(),
+            self.scale,
+        );
+        self.hold_still(s);
+        let still = self.mask_iou()?;
+        (self.still.iou_tracked, self.still.iou_still) = (Some(tracked), Some(still));
+        if tracked - still <= self.cfg.static_iou_drop {
+            return Ok(true);
+        }
+        tracing::info!(object = %self.object.name, iou_tracked = tracked, iou_still = still,
+            "still by its motion, but one pose covers its masks worse than its track \
+             (objects.static_iou_drop): a mover");
+        (self.model, self.object.trajectory, self.scale) = saved;
+        self.object.is_static = false;
+        Ok(false)
+    }
+
     /// The median contact ratio over the views (how the static scene reads behind an
     /// object that touches it; `contact.rs`), None without a background behind it.
     pub fn contact_ratio(&mut self) -> Result<Option<f32>, splat::SplatError> {
@@ -700,8 +732,9 @@ pub fn fit(
             let still = t.still_scale();
             tracing::debug!(object = name, evidence = ?t.still, is_static = still.is_some(), "static test");
             if let Some(s) = still {
-                t.hold_still(s);
-                return t.finish();
+                if t.hold_still_if_it_fits(s)? {
+                    return t.finish();
+                }
             }
             evidence = (t.residual_motion, t.still);
         }

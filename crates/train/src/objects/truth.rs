@@ -69,6 +69,10 @@ pub struct ObjectScore {
     /// How far the turn moves its Gaussians, over its extent.
     pub residual_turn: Option<f32>,
     pub ring_offset: Option<f32>,
+    /// Median mask IoU of its track and of one pose held still, when the motion measures
+    /// called it still.
+    pub iou_tracked: Option<f32>,
+    pub iou_still: Option<f32>,
     pub mask_iou: Option<f32>,
     /// The start's readings of the gauge (`scale.rs`) and its choice, a mover's.
     pub cues: Option<super::scale::ScaleCues>,
@@ -157,6 +161,8 @@ pub fn score(
                 residual_angle_deg: report.map(|r| r.still.angle_deg),
                 residual_turn: report.map(|r| r.still.turn),
                 ring_offset: report.and_then(|r| r.still.ring_offset),
+                iou_tracked: report.and_then(|r| r.still.iou_tracked),
+                iou_still: report.and_then(|r| r.still.iou_still),
                 mask_iou: report.map(|r| r.mask_iou),
                 cues: report.and_then(|r| r.cues),
                 gauge: report.and_then(|r| r.gauge),

@@ -125,7 +125,7 @@ impl Default for ObjectsConfig {
             static_motion: 0.25,
             static_angle_deg: 10.0,
             static_ring_tolerance: 1.6,
-            static_iou_drop: 1.0,
+            static_iou_drop: 0.1,
             min_rigid_iou: 0.0,
             track_pose_iters: 30,
             track_shape_iters: 10,

@@ -75,9 +75,10 @@ struct ToycarsArgs {
     ///
     /// crate: a wooden toy crate (0.30 long, 0.22 wide, 0.20 high) with different markings
     /// on every face; barrel: an upright red barrel (0.19 across, 0.24 high) with a band,
-    /// a label and a marked lid; crane: an articulated wooden crane (a 0.26 × 0.20 base,
-    /// a 0.37 boom hinged 0.14 up that swings ±50° along the yaw once and dips twice, a
-    /// bucket at its tip rocking ±35°), whose parts' poses objects.json records. Props stand on the ground with their centre at (x, y),
+    /// a label and a marked lid; crane: an articulated wooden crane (a 0.36 × 0.28 base,
+    /// a 0.52 boom hinged 0.19 up that swings ±50° about the vertical once and dips twice,
+    /// a bucket at its tip rocking ±35°), whose parts' poses objects.json records and whose
+    /// part maps go to parts/. Props stand on the ground with their centre at (x, y),
     /// get the next mask IDs (3, 4, ...) and the names crate, crate-2, ..., barrel, ...;
     /// move one with --route crate=....
     ///

@@ -4,7 +4,8 @@
 mod common;
 
 use train::field_node::FieldNode;
-use train::objects::RigidObjects;
+use train::objects::start::StartReport;
+use train::objects::{ObjectsConfig, RigidObjects};
 use train::{checkpoint, Trainer};
 
 fn train_psnr(tr: &mut Trainer) -> f64 {
@@ -395,33 +396,39 @@ fn rigid_objects_survive_densify_and_resume() {
     }
 }
 
-/// `min_scale_confidence = 1` asks every cue to agree with a mover's gauge; a mover whose
-/// cues do not is left to the deformation field (no Gaussians, no trajectory), and the
-/// start's report says so.
-#[test]
-fn a_mover_without_an_agreed_depth_is_left_to_the_field() {
+/// The start reports of a short run whose objects start at iteration 20 with a small,
+/// quick track, after `tweak` changes the objects' settings.
+fn start_reports(tweak: impl FnOnce(&mut ObjectsConfig)) -> Vec<StartReport> {
     let mut cfg = common::small_config(80);
     cfg.objects.enabled = true;
     cfg.objects.start_iter = 20;
     (cfg.objects.lift_points, cfg.objects.lift_thickness) = (300, vec![0.25]);
     (cfg.objects.track_pose_iters, cfg.objects.track_shape_iters) = (5, 2);
     cfg.objects.track_refine_iters = 20;
-    cfg.objects.min_scale_confidence = 1.0;
+    tweak(&mut cfg.objects);
     cfg.validate().unwrap();
     let mut t = Trainer::new(cfg, scene_with_id_maps(), 7).unwrap();
     for _ in 0..25 {
         t.step().unwrap();
     }
-    let node = t.nodes.get::<RigidObjects>().expect("objects started");
-    assert_eq!(node.start_reports.len(), 3, "every object reported");
-    for r in &node.start_reports {
-        let placed = node.objects.iter().any(|o| o.id == r.id);
+    t.nodes
+        .get::<RigidObjects>()
+        .expect("objects started")
+        .start_reports
+        .clone()
+}
+
+/// `min_scale_confidence = 1` asks every cue to agree with a mover's gauge; a mover whose
+/// cues do not is left to the deformation field (no Gaussians, no trajectory), and the
+/// start's report says so.
+#[test]
+fn a_mover_without_an_agreed_depth_is_left_to_the_field() {
+    let reports = start_reports(|o| o.min_scale_confidence = 1.0);
+    assert_eq!(reports.len(), 3, "every object reported");
+    for r in &reports {
         let doubted = !r.is_static && r.gauge.is_some_and(|g| g.confidence < 1.0);
         assert_eq!(r.left_to_field, doubted, "{r:?}");
-        assert_eq!(placed, !doubted, "{}", r.name);
-        if doubted {
-            assert_eq!(r.gaussians, 0);
-        }
+        assert_eq!(r.gaussians == 0, doubted, "{r:?}");
     }
 }
 
@@ -430,37 +437,21 @@ fn a_mover_without_an_agreed_depth_is_left_to_the_field() {
 /// the deformation field, still or moving, and the start's report says so.
 #[test]
 fn an_object_its_rigid_fit_does_not_cover_is_left_to_the_field_still_or_moving() {
-    let mut cfg = common::small_config(80);
-    cfg.objects.enabled = true;
-    cfg.objects.start_iter = 20;
-    (cfg.objects.lift_points, cfg.objects.lift_thickness) = (300, vec![0.25]);
-    (cfg.objects.track_pose_iters, cfg.objects.track_shape_iters) = (5, 2);
-    cfg.objects.track_refine_iters = 20;
-    cfg.objects.min_rigid_iou = 0.9;
-    // A static test that passes any finite motion and does not check the overlap: the
-    // tiny scene's movers are held still, and one pose covers their masks badly.
-    cfg.objects.static_image_motion = 1e6;
-    cfg.objects.static_motion = 1e6;
-    cfg.objects.static_ring_tolerance = 1e6;
-    cfg.objects.static_iou_drop = 1.0;
-    cfg.validate().unwrap();
-    let mut t = Trainer::new(cfg, scene_with_id_maps(), 7).unwrap();
-    for _ in 0..25 {
-        t.step().unwrap();
-    }
-    let node = t.nodes.get::<RigidObjects>().expect("objects started");
-    assert_eq!(node.start_reports.len(), 3, "every object reported");
+    let reports = start_reports(|o| {
+        o.min_rigid_iou = 0.9;
+        // A static test that passes any finite motion and does not check the overlap: the
+        // tiny scene's movers are held still, and one pose covers their masks badly.
+        (o.static_image_motion, o.static_motion) = (1e6, 1e6);
+        (o.static_ring_tolerance, o.static_iou_drop) = (1e6, 1.0);
+    });
+    assert_eq!(reports.len(), 3, "every object reported");
     assert!(
-        node.start_reports
-            .iter()
-            .any(|r| r.is_static && r.left_to_field),
-        "a still pose that covers a mover's masks badly goes to the field: {:?}",
-        node.start_reports
+        reports.iter().any(|r| r.is_static && r.left_to_field),
+        "a still pose that covers a mover's masks badly goes to the field: {reports:?}"
     );
-    for r in &node.start_reports {
-        let placed = node.objects.iter().any(|o| o.id == r.id);
+    for r in &reports {
         assert_eq!(r.left_to_field, r.mask_iou < 0.9, "{r:?}");
-        assert_eq!(placed, !r.left_to_field, "{}", r.name);
+        assert_eq!(r.gaussians == 0, r.left_to_field, "{r:?}");
     }
 }
 
@@ -471,24 +462,12 @@ fn an_object_its_rigid_fit_does_not_cover_is_left_to_the_field_still_or_moving()
 #[test]
 fn holding_still_must_not_cost_the_masks_overlap() {
     let reports = |drop: f32| {
-        let mut cfg = common::small_config(80);
-        cfg.objects.enabled = true;
-        cfg.objects.start_iter = 20;
-        (cfg.objects.lift_points, cfg.objects.lift_thickness) = (300, vec![0.25]);
-        (cfg.objects.track_pose_iters, cfg.objects.track_shape_iters) = (5, 2);
-        cfg.objects.track_refine_iters = 20;
-        // Motion measures that call any finite motion still: the tiny scene's movers
-        // reach the IoU check.
-        cfg.objects.static_image_motion = 1e6;
-        cfg.objects.static_motion = 1e6;
-        cfg.objects.static_ring_tolerance = 1e6;
-        cfg.objects.static_iou_drop = drop;
-        cfg.validate().unwrap();
-        let mut t = Trainer::new(cfg, scene_with_id_maps(), 7).unwrap();
-        for _ in 0..25 {
-            t.step().unwrap();
-        }
-        t.nodes.get::<RigidObjects>().unwrap().start_reports.clone()
+        start_reports(|o| {
+            // Motion measures that call any finite motion still: the tiny scene's movers
+            // reach the IoU check.
+            (o.static_image_motion, o.static_motion) = (1e6, 1e6);
+            (o.static_ring_tolerance, o.static_iou_drop) = (1e6, drop);
+        })
     };
     let (checked, unchecked) = (reports(0.02), reports(1.0));
     let mut kept_moving = 0;

@@ -166,6 +166,11 @@ fn consistency(run: &Path, iteration: Option<u32>, out_dir: &Path) -> Result<()>
                     .as_f64()
                     .map_or("n/a (still)".into(), |v| format!("{:.0} %", 100.0 * v));
                 part += &format!("; its {pname} follows {f}");
+                if let (Some(n), Some(f)) = (p["in_node"].as_u64(), p["follow_in_node"].as_f64()) {
+                    let all = p["members"].as_u64().unwrap_or(0).max(1);
+                    let share = 100.0 * n as f64 / all as f64;
+                    part += &format!(" (its node's {share:.0} % of them {:.0} %)", 100.0 * f);
+                }
             }
             parts.push(part);
         }

@@ -58,6 +58,11 @@ pub struct Args {
     /// Train without rigid objects (the default unless the config enables them).
     #[arg(long)]
     pub no_objects: bool,
+    /// Articulated objects (docs/objects.md): an object may become up to N rigid parts,
+    /// found from its masks and held together at joints, when parts explain its views
+    /// better than one rigid body (sets `objects.parts`; 1: rigid only). Use with --objects.
+    #[arg(long, value_name = "N")]
+    pub parts: Option<usize>,
     /// Start from run FROM's checkpoint just before the regularizer's start instead of from
     /// scratch: exact, since both runs are the same until then. The scene, seed, downscale
     /// and background are FROM's; --config/--iters/--reg must give FROM's config except in
@@ -79,6 +84,10 @@ fn new_config(a: &Args) -> Result<TrainConfig> {
     }
     if a.objects || a.no_objects {
         cfg.objects.enabled = a.objects;
+    }
+    if let Some(n) = a.parts {
+        cfg.objects.parts = n;
+        cfg.validate()?;
     }
     if let Some(m) = &a.checkpoint_minutes {
         cfg.log.checkpoint_minutes = m.clone();
@@ -138,10 +147,11 @@ fn resumed(a: &Args) -> Result<Trainer> {
         || a.no_reg
         || a.objects
         || a.no_objects
+        || a.parts.is_some()
         || a.checkpoint_minutes.is_some()
     {
         bail!(
-            "--resume continues with the run's saved config; drop --config/--iters/--reg/--no-reg/--objects/--checkpoint-minutes"
+            "--resume continues with the run's saved config; drop --config/--iters/--reg/--no-reg/--objects/--parts/--checkpoint-minutes"
         );
     }
     let info = RunInfo::load(&a.out)?;

@@ -77,7 +77,8 @@ pub struct VehicleMetrics {
 /// The start's decision on one object and the confidence of its gauge.
 pub struct RigidStart {
     pub id: u8,
-    /// `static` (one pose), `moving` or `field` (left to the deformation field).
+    /// `static` (one pose), `moving`, `parts` (articulated: several rigid parts) or
+    /// `field` (left to the deformation field).
     pub decision: &'static str,
     /// The gauge's confidence for a mover placed by its cues (`objects::scale`).
     pub scale_confidence: Option<f32>,
@@ -104,6 +105,7 @@ fn rigid_starts(loaded: &train::checkpoint::LoadedModel) -> Vec<RigidStart> {
             id: r.id,
             decision: match (r.left_to_field, r.is_static) {
                 (true, _) => "field",
+                _ if r.parts.is_some_and(|p| p.kept) => "parts",
                 (false, true) => "static",
                 (false, false) => "moving",
             },
@@ -240,8 +242,10 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
     let pose_ref = pose(reference)?;
     let mut acc = ConsistencyAccumulator::new();
     let mut rigidity = RigidityAccumulator::new();
+    // An articulated object's parts count as its node.
+    let by_mask = train::objects::column_by_mask(loaded.objects(), &loaded.column);
     let mut split =
-        (!loaded.objects().is_empty()).then(|| SplitAccumulator::new(&groups, &loaded.column));
+        (!loaded.objects().is_empty()).then(|| SplitAccumulator::new(&groups, &by_mask));
     let mut parts = match objects.objects.iter().any(|o| !o.parts.is_empty()) {
         true => {
             let path = scene::part_map_path(&ds.root, &reference.file_path);
@@ -251,7 +255,8 @@ pub fn run_consistency(run: &Path, iteration: Option<u32>) -> Result<VehicleMetr
                 stride: k,
             };
             let maps = (&mask.data[..], &map.data[..]);
-            PartAccumulator::new(topk, k, maps, &objects, loaded.model.len())?
+            let column = (&objects, &by_mask[..]);
+            PartAccumulator::new(topk, k, maps, column, loaded.model.len())?
         }
         false => None,
     };
@@ -357,7 +362,8 @@ pub fn named_consistency(run: &Path, iteration: Option<u32>) -> Result<Option<se
                 .iter()
                 .filter(|p| p.object == o.object)
                 .map(|p| {
-                    let v = serde_json::json!({"members": p.members, "follow": p.follow});
+                    let v = serde_json::json!({"members": p.members, "follow": p.follow,
+                        "in_node": p.in_node, "follow_in_node": p.follow_in_node});
                     (p.name.clone(), v)
                 })
                 .collect();

@@ -17,6 +17,8 @@ struct PartMembers {
     /// The part's index in the object's `parts`; `None`: the body.
     part: Option<usize>,
     members: Vec<u32>,
+    /// The members the object's own node holds (its column, parts counted as the object).
+    in_node: Vec<u32>,
 }
 
 /// The follow of one part of an articulated object.
@@ -26,12 +28,16 @@ pub struct PartFollow {
     pub name: String,
     pub members: usize,
     pub follow: Option<f64>,
+    /// Runs with objects: how many members the object's node holds, and their follow.
+    pub in_node: usize,
+    pub follow_in_node: Option<f64>,
 }
 
 /// Collects one test time after another, as `ConsistencyAccumulator` does, per part.
 pub struct PartAccumulator {
     parts: Vec<PartMembers>,
-    acc: Vec<ConsistencyAccumulator>,
+    /// Per part: all its members, and those in the object's node.
+    acc: Vec<[ConsistencyAccumulator; 2]>,
 }
 
 /// One slot per (articulated object, part) seen in the maps: `(object index, part)`.
@@ -78,11 +84,13 @@ fn matrix(frame: &ObjectFrame, index: usize, part: Option<usize>) -> &[[f32; 4];
 impl PartAccumulator {
     /// The parts' groups from a render's top-k at `t_ref` (`use_k` of them), the reference
     /// frame's ID map `ids` and part map `parts`; `None` when no articulated object shows.
+    /// `column` (the run's object column with parts mapped to their object; empty without
+    /// objects) says which members the object's node holds.
     pub fn new(
         topk: TopKView<'_>,
         use_k: usize,
         (ids, parts): (&[u8], &[u8]),
-        objects: &ObjectsFile,
+        (objects, column): (&ObjectsFile, &[u8]),
         n_gaussians: usize,
     ) -> Result<Option<Self>> {
         let (map, slots) = slot_map(ids, parts, objects);
@@ -92,28 +100,35 @@ impl PartAccumulator {
         let mut groups = ObjectGroups::new();
         groups.build(topk, use_k, &map, n_gaussians)?;
         let groups = groups.iter().map(|g| (g.object, g.members));
-        Ok(Self::from_groups(groups, &slots, objects))
+        Ok(Self::from_groups(groups, &slots, (objects, column)))
     }
 
     /// [`Self::new`] from `(slot, members)` pairs.
     fn from_groups<'a>(
         groups: impl Iterator<Item = (u8, &'a [u32])>,
         slots: &[Slot],
-        objects: &ObjectsFile,
+        (objects, column): (&ObjectsFile, &[u8]),
     ) -> Option<Self> {
         let parts: Vec<PartMembers> = groups
             .filter_map(|(slot, members)| {
                 let &(index, part) = slots.get(usize::from(slot))?;
+                let object = objects.objects[index].id;
+                let in_node = members
+                    .iter()
+                    .copied()
+                    .filter(|&m| column.get(m as usize) == Some(&object))
+                    .collect();
                 Some(PartMembers {
-                    object: objects.objects[index].id,
+                    object,
                     index,
                     part,
                     members: members.to_vec(),
+                    in_node,
                 })
             })
             .collect();
         (!parts.is_empty()).then(|| Self {
-            acc: vec![ConsistencyAccumulator::new(); parts.len()],
+            acc: vec![[ConsistencyAccumulator::new(), ConsistencyAccumulator::new()]; parts.len()],
             parts,
         })
     }
@@ -126,16 +141,18 @@ impl PartAccumulator {
         deformed: &[f32],
     ) -> Result<()> {
         for (p, acc) in self.parts.iter().zip(&mut self.acc) {
-            if p.members.is_empty() {
-                continue;
+            for (members, acc) in [&p.members, &p.in_node].into_iter().zip(acc) {
+                if members.is_empty() {
+                    continue;
+                }
+                let track = ObjectTrack {
+                    object: p.object,
+                    members,
+                    pose_ref: matrix(pose_ref, p.index, p.part),
+                    pose_t: matrix(pose_t, p.index, p.part),
+                };
+                acc.add_time(time, &[track], anchor, deformed)?;
             }
-            let track = ObjectTrack {
-                object: p.object,
-                members: &p.members,
-                pose_ref: matrix(pose_ref, p.index, p.part),
-                pose_t: matrix(pose_t, p.index, p.part),
-            };
-            acc.add_time(time, &[track], anchor, deformed)?;
         }
         Ok(())
     }
@@ -151,13 +168,17 @@ impl PartAccumulator {
                     |k| objects.objects[p.index].parts[k].name.clone(),
                 ),
                 members: p.members.len(),
-                follow: acc
-                    .report()
-                    .ok()
-                    .and_then(|r| r.per_object.first().and_then(|o| o.follow())),
+                in_node: p.in_node.len(),
+                follow: follow(&acc[0]),
+                follow_in_node: follow(&acc[1]),
             })
             .collect()
     }
+}
+
+fn follow(acc: &ConsistencyAccumulator) -> Option<f64> {
+    let r = acc.report().ok()?;
+    r.per_object.first().and_then(|o| o.follow())
 }
 
 #[cfg(test)]
@@ -241,20 +262,32 @@ mod tests {
         let slots = [(1, None), (1, Some(0)), (1, Some(1))];
         let members: [&[u32]; 3] = [&[0, 1], &[2, 3], &[4]];
         let groups = (0u8..).zip(members);
-        let mut acc = PartAccumulator::from_groups(groups, &slots, &objects).unwrap();
+        // Members 2 (boom) and 4 (bucket) are the crane's node's (ID 2); 3 is the field's.
+        let column = [2u8, 255, 2, 255, 2];
+        let mut acc = PartAccumulator::from_groups(groups, &slots, (&objects, &column)).unwrap();
         let (f0, f1) = (&objects.frames[0], &objects.frames[1]);
         acc.add_time(1.0, (f0, f1), &anchor, &moved).unwrap();
-        let got: Vec<(String, usize, Option<f64>)> = acc
+        let round = |f: Option<f64>| f.map(|f| (f * 1e6).round() / 1e6);
+        type Row = (String, usize, Option<f64>, usize, Option<f64>);
+        let got: Vec<Row> = acc
             .finish(&objects)
             .into_iter()
-            .map(|p| (p.name, p.members, p.follow.map(|f| (f * 1e6).round() / 1e6)))
+            .map(|p| {
+                (
+                    p.name,
+                    p.members,
+                    round(p.follow),
+                    p.in_node,
+                    round(p.follow_in_node),
+                )
+            })
             .collect();
         assert_eq!(
             got,
             [
-                ("body".into(), 2, None),
-                ("boom".into(), 2, Some(1.0)),
-                ("bucket".into(), 1, Some(0.0)),
+                ("body".into(), 2, None, 1, None),
+                ("boom".into(), 2, Some(1.0), 1, Some(1.0)),
+                ("bucket".into(), 1, Some(0.0), 1, Some(0.0)),
             ]
         );
     }

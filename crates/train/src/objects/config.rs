@@ -66,6 +66,23 @@ pub struct ObjectsConfig {
     /// body (a hand, a person, a crane swinging its boom): it is left to the deformation
     /// field, with a warning saying so. 0 keeps every object rigid.
     pub min_rigid_iou: f32,
+    /// Articulated objects (`parts/`): at most this many rigid parts per object (1: every
+    /// object is one rigid body). With more, each object is cut into this many spatial
+    /// clusters, re-tracked with one trajectory per cluster held together at their joints,
+    /// and clusters that move alike are merged; the result replaces the rigid fit when it
+    /// keeps two or more parts and lowers the tracking loss by `parts_min_gain`.
+    pub parts: usize,
+    /// Two clusters are one part when their relative motion (RMS over views and their
+    /// Gaussians of the distance between where each one's trajectory carries them) stays
+    /// below this fraction of the object's size.
+    pub parts_merge: f32,
+    /// Relative drop of the mean tracking loss (colour + mask, over the views) the parts
+    /// must bring over the rigid fit to be kept.
+    pub parts_min_gain: f32,
+    /// Weight of the joint term that holds neighbouring parts together (squared distance
+    /// between where the two parts carry their joint point, over the object's size²), while
+    /// tracking and in training.
+    pub joint_weight: f32,
     /// Tracking (time-progressive fitting): iterations of pose fitting per new frame, and of
     /// shape/appearance refinement on already tracked frames after each new frame.
     pub track_pose_iters: u32,
@@ -127,6 +144,10 @@ impl Default for ObjectsConfig {
             static_ring_tolerance: 1.6,
             static_iou_drop: 0.1,
             min_rigid_iou: 0.0,
+            parts: 1,
+            parts_merge: 0.1,
+            parts_min_gain: 0.1,
+            joint_weight: 10.0,
             track_pose_iters: 30,
             track_shape_iters: 10,
             track_refine_iters: 1000,
@@ -196,6 +217,18 @@ impl ObjectsConfig {
                 self.static_iou_drop
             ));
         }
+        if !(1..=16).contains(&self.parts) {
+            return Err(format!(
+                "objects.parts must be in 1..=16, got {}",
+                self.parts
+            ));
+        }
+        if !(0.0..1.0).contains(&self.parts_min_gain) {
+            return Err(format!(
+                "objects.parts_min_gain must be in [0, 1), got {}",
+                self.parts_min_gain
+            ));
+        }
         if !(0.0..=1.0).contains(&self.min_rigid_iou) {
             return Err(format!(
                 "objects.min_rigid_iou must be in [0, 1], got {}",
@@ -216,6 +249,8 @@ impl ObjectsConfig {
             ("objects.track_lr_opacity", self.track_lr_opacity),
             ("objects.track_lr_scales", self.track_lr_scales),
             ("objects.lambda_mask", self.lambda_mask),
+            ("objects.parts_merge", self.parts_merge),
+            ("objects.joint_weight", self.joint_weight),
         ];
         for (name, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {

@@ -3,7 +3,8 @@
 //! `λ·(Σ_M (1 − α) + Σ_out α) / |M|` (`out` = background pixels; other objects' pixels are
 //! skipped since they may hide this one). It keeps the trajectory on the object where the
 //! photometric gradient is weak (flat colours, motion blur of a poor early model), and keeps
-//! the object's Gaussians inside its silhouette. Only alpha is rendered (colour 0).
+//! the object's Gaussians inside its silhouette. Only alpha is rendered (colour 0). The
+//! parts of an articulated object share its mask, so they are rendered together.
 
 use super::place::NO_OBJECT;
 use super::RigidObject;
@@ -35,6 +36,8 @@ pub struct MaskLoss {
     grads: Gradients,
     dl_dimage: Vec<f32>,
     dl_dalpha: Vec<f32>,
+    /// The rows of the object being rendered (all its parts).
+    rows: Vec<u32>,
 }
 
 impl MaskLoss {
@@ -46,12 +49,16 @@ impl MaskLoss {
         grads: &mut Gradients,
     ) -> Result<f32, splat::SplatError> {
         let mut total = 0.0;
-        for (o, rows) in inp.objects.iter().zip(inp.rows) {
-            let area = inp.id_map.iter().filter(|&&v| v == o.id).count();
-            if o.is_static || rows.is_empty() || area == 0 {
+        let mut rows = std::mem::take(&mut self.rows);
+        for mask in moving_masks(inp.objects) {
+            rows.clear();
+            let bodies = inp.objects.iter().zip(inp.rows);
+            rows.extend(bodies.filter(|(o, _)| o.mask == mask).flat_map(|(_, r)| r));
+            let area = inp.id_map.iter().filter(|&&v| v == mask).count();
+            if rows.is_empty() || area == 0 {
                 continue;
             }
-            self.gather(inp, rows);
+            self.gather(inp, &rows);
             let g = Gaussians {
                 means: &self.means,
                 quats: &self.quats,
@@ -65,7 +72,7 @@ impl MaskLoss {
             self.dl_dalpha.clear();
             let mut loss = 0.0;
             for (&id, &a) in inp.id_map.iter().zip(out.alpha) {
-                let d = if id == o.id {
+                let d = if id == mask {
                     loss += w * (1.0 - a);
                     -w
                 } else if id == NO_OBJECT {
@@ -86,12 +93,26 @@ impl MaskLoss {
                 Some(&self.dl_dalpha),
                 &mut self.grads,
             )?;
-            self.scatter(rows, grads);
+            self.scatter(&rows, grads);
             total += loss;
         }
+        self.rows = rows;
         Ok(total)
     }
+}
 
+/// The mask IDs of the objects with a moving body, in first-seen order.
+fn moving_masks(objects: &[RigidObject]) -> Vec<u8> {
+    let mut out: Vec<u8> = Vec::new();
+    for o in objects.iter().filter(|o| !o.is_static) {
+        if !out.contains(&o.mask) {
+            out.push(o.mask);
+        }
+    }
+    out
+}
+
+impl MaskLoss {
     fn gather(&mut self, inp: &MaskInput, rows: &[u32]) {
         let d = inp.deformed;
         self.means.clear();

@@ -98,9 +98,11 @@ impl Membership {
             return 0;
         };
         let cols = state.aux[vi].cols;
+        // Votes name objects of the ID maps; a part counts as its object.
+        let mask_of = |id: u8| objects.iter().find(|o| o.id == id).map_or(id, |o| o.mask);
         let mut moved = Vec::new();
         for (i, &ok) in at.placed.iter().enumerate() {
-            let from = state.object[i];
+            let from = mask_of(state.object[i]);
             if !ok {
                 continue;
             }
@@ -108,17 +110,52 @@ impl Membership {
             let Some(to) = self.elected(row).filter(|&to| to != from) else {
                 continue;
             };
-            if let Some(o) = objects.iter().find(|o| o.id == to) {
-                moved.push((i, to, o));
+            if objects.iter().any(|o| o.mask == to) {
+                moved.push((i, to));
             }
         }
-        for &(i, to, o) in &moved {
+        for &(i, to) in &moved {
+            let o = nearest_body(state, objects, to, i, at);
             convert(state, i, o, at);
-            state.object[i] = to;
+            state.object[i] = o.id;
             state.aux[vi].data[i * cols..(i + 1) * cols].fill(0.0);
         }
         moved.len()
     }
+}
+
+/// The body of object `mask` that Gaussian `i` joins: the object itself, or for an
+/// articulated one the part whose placed Gaussian is nearest to it at `at.time`.
+fn nearest_body<'a>(
+    state: &GaussianState,
+    objects: &'a [RigidObject],
+    mask: u8,
+    i: usize,
+    at: &StepPlacement,
+) -> &'a RigidObject {
+    let bodies: Vec<&RigidObject> = objects.iter().filter(|o| o.mask == mask).collect();
+    let whole = bodies.iter().find(|o| !o.is_part()).unwrap_or(&bodies[0]);
+    if bodies.len() == 1 {
+        return whole;
+    }
+    let d = &at.deformed.means;
+    let x = [d[i * 3], d[i * 3 + 1], d[i * 3 + 2]];
+    let mut best = (f32::INFINITY, *whole);
+    for (j, &id) in state.object.iter().enumerate() {
+        let Some(b) = bodies
+            .iter()
+            .find(|b| b.id == id)
+            .filter(|_| at.placed[j] && j != i)
+        else {
+            continue;
+        };
+        let y = [d[j * 3], d[j * 3 + 1], d[j * 3 + 2]];
+        let dist = (0..3).map(|c| (x[c] - y[c]).powi(2)).sum::<f32>();
+        if dist < best.0 {
+            best = (dist, *b);
+        }
+    }
+    best.1
 }
 
 /// Puts Gaussian `i` (placed in the world by `at`) into object `o`'s frame at `at.time`.

@@ -35,6 +35,7 @@ pub mod lift;
 pub mod mask_loss;
 pub mod membership;
 pub mod node;
+pub mod parts;
 pub mod place;
 pub mod regauge;
 pub mod scale;
@@ -56,11 +57,14 @@ use crate::model::GaussianModel;
 use knots::KnotAdam;
 use trajectory::TrajectoryGrad;
 
-/// One rigid object: its ID in the object-ID maps, a name, and its trajectory. A static
-/// object keeps one pose and gets no pose gradient.
+/// One rigid body of the scene: its ID in the object column, the ID of the object-ID maps
+/// whose pixels it is seen in (`mask`), a name, and its trajectory. A whole object has
+/// `mask == id`; a part of an articulated object ([`parts`]) has a column ID of its own and
+/// its object's `mask`. A static body keeps one pose and gets no pose gradient.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RigidObject {
     pub id: u8,
+    pub mask: u8,
     pub name: String,
     pub is_static: bool,
     pub trajectory: Trajectory,
@@ -70,11 +74,27 @@ impl RigidObject {
     pub fn new(id: u8, name: String, trajectory: Trajectory, is_static: bool) -> Self {
         Self {
             id,
+            mask: id,
             name,
             is_static,
             trajectory,
         }
     }
+
+    /// Whether this body is a part of an articulated object other than its body.
+    pub fn is_part(&self) -> bool {
+        self.id != self.mask
+    }
+}
+
+/// The object column with every part's ID replaced by its object's mask ID, so rows are
+/// counted per object of the ID maps (evaluation, selection).
+pub fn column_by_mask(objects: &[RigidObject], column: &[u8]) -> Vec<u8> {
+    let mut map: [u8; 256] = std::array::from_fn(|i| i as u8);
+    for o in objects {
+        map[o.id as usize] = o.mask;
+    }
+    column.iter().map(|&c| map[c as usize]).collect()
 }
 
 /// The rigid-object node of a training run: config, the training views' ID maps, the
@@ -94,6 +114,8 @@ pub struct RigidObjects {
     pub start_reports: Vec<start::StartReport>,
     /// Persistent top-k votes and the transfer rule (None with `transfer = false`).
     pub membership: Option<membership::Membership>,
+    /// Joints between the parts of articulated objects, by column ID ([`parts::joints`]).
+    pub joints: Vec<parts::Joint>,
     rows: Vec<Vec<u32>>,
     poses: Vec<Pose>,
     grads: Vec<TrajectoryGrad>,
@@ -117,6 +139,7 @@ impl RigidObjects {
             cfg,
             objects: Vec::new(),
             knot_adam: Vec::new(),
+            joints: Vec::new(),
             started: false,
             id_maps,
             names,
@@ -205,6 +228,7 @@ impl RigidObjects {
             canon,
             &mut self.grads,
         );
+        parts::joints::add(&self.joints, &self.objects, &self.poses, &mut self.grads);
     }
 
     /// Adam on the knots that this step's view touched.

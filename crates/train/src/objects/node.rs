@@ -172,6 +172,7 @@ impl Node for RigidObjects {
         self.start_reports = stored.start_reports;
         self.objects = stored.objects;
         self.knot_adam = stored.knot_adam;
+        self.joints = stored.joints;
         Ok(())
     }
 

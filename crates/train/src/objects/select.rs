@@ -45,7 +45,11 @@ impl Selection {
         }
         let mut named = Vec::with_capacity(names.len());
         for n in names {
-            named.push(part_of(objects, n)?);
+            let v = part_of(objects, n)?;
+            named.push(v);
+            // An articulated object's name stands for all its parts.
+            let parts = objects.iter().filter(|o| o.is_part() && o.mask == v);
+            named.extend(parts.map(|o| o.id));
         }
         let order = objects.iter().map(|o| o.id).chain([NO_OBJECT]);
         let parts: Vec<u8> = order.filter(|v| named.contains(v)).collect();
@@ -187,6 +191,24 @@ mod tests {
         assert_eq!(s.label(), "without-green-suv+background");
         let s = Selection::resolve(&o, SelectMode::Only, &names(&["background"])).unwrap();
         assert_eq!(s.keep_mask(&COLUMN), [true, false, false, false, true]);
+    }
+
+    #[test]
+    fn an_articulated_objects_name_keeps_its_parts() {
+        let mut o = objects();
+        let tr = o[0].trajectory.clone();
+        let mut boom = RigidObject::new(254, "crane/part-1".into(), tr, false);
+        boom.mask = 2;
+        o.push(boom);
+        let s = Selection::resolve(&o, SelectMode::Only, &names(&["green-suv"])).unwrap();
+        assert_eq!(s.parts, [2, 254]);
+        assert_eq!(
+            s.keep_mask(&[2, 254, 0, NO_OBJECT]),
+            [true, true, false, false]
+        );
+        // The part alone, by its own name.
+        let s = Selection::resolve(&o, SelectMode::Only, &names(&["crane/part-1"])).unwrap();
+        assert_eq!(s.parts, [254]);
     }
 
     #[test]

@@ -4,6 +4,7 @@
 //! through the others ([`super::track`]), which also decides whether it is static.
 
 use super::lift::{self, DepthMap, LiftInput};
+use super::parts;
 use super::track::{self, TrackView};
 use super::{knots::KnotAdam, RigidObject, RigidObjects, NO_OBJECT};
 use crate::deform::{self, Deformed};
@@ -42,6 +43,9 @@ pub struct StartReport {
     /// object.
     pub cues: Option<super::scale::ScaleCues>,
     pub gauge: Option<super::scale::GaugeChoice>,
+    /// What the split into parts measured (`objects.parts` > 1), and whether it was kept.
+    #[serde(default)]
+    pub parts: Option<super::parts::PartsEvidence>,
 }
 
 /// The static background's camera depth in every training view (δ = 0: the background
@@ -167,23 +171,27 @@ pub fn start(
         // The lifts draw from their own stream, seeded from the run's, so runs repeat.
         let mut lift_rng = rand_chacha::ChaCha8Rng::seed_from_u64(rng.gen());
         let mut lift = |th: f32| lift_at(node, ds, &seen[0], *id, th, &mut lift_rng);
-        done.push(track::fit(
-            &v,
-            *id,
-            &node.name_of(*id),
-            &mut lift,
-            &node.cfg,
-            rng,
-        )?);
+        let name = node.name_of(*id);
+        let fit = track::fit(&v, *id, &name, &mut lift, &node.cfg, rng)?;
+        let split = parts::split(&v, *id, &name, &fit, &node.cfg, rng)?;
+        done.push((fit, split));
     }
+    let mut free = free_ids(&node.id_maps);
     let mut reports = Vec::new();
-    for (f, (id, seen)) in done.into_iter().zip(&ids) {
+    for ((f, split), (id, seen)) in done.into_iter().zip(&ids) {
         let id = *id;
         let name = node.name_of(id);
         let size = median(seen.iter().map(|s| s.size).collect()) * f.scale;
+        let (parts_evidence, articulated) = match split {
+            Some((e, a)) => (Some(e), a),
+            None => (None, None),
+        };
+        let iou = parts_evidence
+            .filter(|e| e.kept)
+            .map_or(f.mask_iou, |e| e.iou_parts);
         // Still or moving: a still pose that covers the masks badly is a body whose parts
         // move (a crane's boom, an arm) as surely as a moving fit that does.
-        let not_rigid = f.mask_iou < node.cfg.min_rigid_iou;
+        let not_rigid = iou < node.cfg.min_rigid_iou;
         let confidence = f.gauge.map_or(1.0, |g| g.confidence);
         let unplaced = !f.is_static && confidence < node.cfg.min_scale_confidence;
         let left_to_field = not_rigid || unplaced;
@@ -197,7 +205,7 @@ pub fn start(
                 min_scale_confidence = node.cfg.min_scale_confidence,
                 "no trustworthy depth: too few of its gauge's cues agree \
                  (objects.min_scale_confidence), so the deformation field keeps it");
-        } else {
+        } else if articulated.is_none() {
             state.append_object(&f.model, id);
             tracing::info!(object = %name, sightings = seen.len(), is_static = f.is_static,
                 residual_motion = f.residual_motion, size, scale = f.scale,
@@ -217,8 +225,13 @@ pub fn start(
             left_to_field,
             cues: f.cues,
             gauge: f.gauge,
+            parts: parts_evidence,
         });
         if left_to_field {
+            continue;
+        }
+        if let Some(a) = articulated {
+            add_parts(node, state, (id, &name), a, &mut free);
             continue;
         }
         node.knot_adam.push(KnotAdam::zeros(f.trajectory.len()));
@@ -228,6 +241,57 @@ pub fn start(
     node.started = true;
     node.start_reports = reports.clone();
     Ok(reports)
+}
+
+/// Column IDs no object of the ID maps uses, highest first: the parts' own IDs.
+fn free_ids(maps: &[Vec<u8>]) -> Vec<u8> {
+    let used = object_ids(maps);
+    (0..NO_OBJECT).filter(|i| !used.contains(i)).collect()
+}
+
+/// Appends an articulated object's parts: the body under the object's ID, every other part
+/// under a free column ID, all seen in the object's mask; the joints follow the IDs.
+fn add_parts(
+    node: &mut RigidObjects,
+    state: &mut GaussianState,
+    (id, name): (u8, &str),
+    a: parts::Articulated,
+    free: &mut Vec<u8>,
+) {
+    let mut ids = Vec::with_capacity(a.parts.len());
+    for (p, part) in a.parts.into_iter().enumerate() {
+        let Some(col) = (if p == 0 { Some(id) } else { free.pop() }) else {
+            tracing::warn!(
+                object = name,
+                "no free object IDs left for its parts: the rest \
+                stay with the body"
+            );
+            break;
+        };
+        state.append_object(&part.model, col);
+        tracing::info!(
+            object = name,
+            part = p,
+            id = col,
+            gaussians = part.model.len(),
+            "part started"
+        );
+        let label = if p == 0 {
+            name.to_string()
+        } else {
+            format!("{name}/part-{p}")
+        };
+        let mut body = RigidObject::new(col, label, part.trajectory, part.is_static);
+        body.mask = id;
+        node.knot_adam.push(KnotAdam::zeros(body.trajectory.len()));
+        node.objects.push(body);
+        ids.push(col);
+    }
+    for j in a.joints {
+        if let (Some(&ja), Some(&jb)) = (ids.get(j.a as usize), ids.get(j.b as usize)) {
+            node.joints.push(parts::Joint { a: ja, b: jb, ..j });
+        }
+    }
 }
 
 fn median(mut v: Vec<f32>) -> f32 {

@@ -36,15 +36,15 @@ pub struct TrackView<'a> {
 }
 
 /// Loss of one view and its gradients w.r.t. the object-only render.
-struct ViewLoss {
-    value: f32,
-    dl_dimage: Vec<f32>,
-    dl_dalpha: Vec<f32>,
+pub(super) struct ViewLoss {
+    pub value: f32,
+    pub dl_dimage: Vec<f32>,
+    pub dl_dalpha: Vec<f32>,
 }
 
 /// `L = mean_M |C − I| + λ·(Σ_M (1 − α) + Σ_out α) / |M|`, where `out` excludes the
 /// pixels of other objects (they may occlude this one).
-fn view_loss(
+pub(super) fn view_loss(
     view: &TrackView,
     gt: &[f32],
     id: u8,
@@ -98,6 +98,9 @@ pub struct Tracker<'a> {
     scale: f32,
     residual_motion: f32,
     still: StillEvidence,
+    /// The least-motion gauge of the first track when its motion measures called it still
+    /// (relative to the lifted guess), kept even when the object stays a mover.
+    still_gauge: Option<f32>,
     /// The readings of the gauge and the choice made from them, for a moving object
     /// ([`Self::scale_cues`], [`scale::choose`]).
     cues: Option<ScaleCues>,
@@ -133,7 +136,7 @@ pub struct StillEvidence {
     pub iou_still: Option<f32>,
 }
 
-const HP: AdamHyper = AdamHyper {
+pub(super) const HP: AdamHyper = AdamHyper {
     beta1: 0.9,
     beta2: 0.999,
     eps: 1e-15,
@@ -215,31 +218,13 @@ impl<'a> Tracker<'a> {
     }
 
     fn step_shape(&mut self) {
-        let c = self.cfg;
-        let [a_means, _, a_scales, a_opacity, a_sh] = &mut self.adam;
-        let m = &mut self.model;
-        a_means.step(&mut m.means, &self.canon.means, HP, c.track_lr_means);
-        a_scales.step(
-            &mut m.log_scales,
-            &self.canon.log_scales,
-            HP,
-            c.track_lr_scales,
+        step_shape(
+            self.cfg,
+            &mut self.adam,
+            &mut self.model,
+            &self.canon,
+            &self.grads,
         );
-        let g = &self.grads;
-        a_opacity.step(
-            &mut m.opacity_logits,
-            &g.opacity_logits,
-            HP,
-            c.track_lr_opacity,
-        );
-        let lr_dc = c.track_lr_colors;
-        a_sh.step_rows(&mut m.sh, &g.colors, HP, ROWS[4], |k| {
-            if k < 3 {
-                lr_dc
-            } else {
-                0.0
-            }
-        });
     }
 
     /// The contact ratio of every view that sees the background behind the object
@@ -303,33 +288,8 @@ impl<'a> Tracker<'a> {
         Ok(())
     }
 
-    /// Constant-velocity prediction of knot `k` from knots `k−1` and `k−2` (a copy of
-    /// knot `k−1` when it is the second view).
     fn predict(&mut self, k: usize) {
-        let tr = &mut self.object.trajectory;
-        let (p1, q1) = (
-            tr.translations[k - 1],
-            quat::normalize(&tr.rotations[k - 1]).0,
-        );
-        if k < 2 {
-            tr.translations[k] = p1;
-            tr.rotations[k] = q1;
-            return;
-        }
-        let (p0, q0) = (
-            tr.translations[k - 2],
-            quat::normalize(&tr.rotations[k - 2]).0,
-        );
-        let dt0 = tr.times[k - 1] - tr.times[k - 2];
-        let f = if dt0 > 0.0 {
-            (tr.times[k] - tr.times[k - 1]) / dt0
-        } else {
-            0.0
-        };
-        tr.translations[k] = std::array::from_fn(|c| p1[c] + f * (p1[c] - p0[c]));
-        // Angular velocity: the step q1·q0⁻¹ (world frame), repeated f times.
-        let step = quat::to_rotvec(quat::mul(q1, quat::conj(q0))).map(|v| v * f);
-        tr.rotations[k] = quat::mul(quat::from_rotvec(step), q1);
+        predict_knot(&mut self.object.trajectory, k);
     }
 }
 
@@ -375,6 +335,7 @@ impl<'a> Tracker<'a> {
             scale: 1.0,
             residual_motion: 0.0,
             still: StillEvidence::default(),
+            still_gauge: None,
             cues: None,
             gauge: None,
         }
@@ -687,6 +648,7 @@ impl<'a> Tracker<'a> {
             scale: self.scale,
             residual_motion: self.residual_motion,
             still: self.still,
+            still_gauge: self.still_gauge,
             mask_iou,
             cues: self.cues,
             gauge: self.gauge,
@@ -694,8 +656,64 @@ impl<'a> Tracker<'a> {
     }
 }
 
+/// Adam on the object's Gaussians while tracking: means, log-scales, opacity and the SH DC
+/// colour; rotations are left to training.
+pub(super) fn step_shape(
+    c: &ObjectsConfig,
+    adam: &mut [Adam; 5],
+    m: &mut GaussianModel,
+    canon: &CanonicalGrads,
+    g: &Gradients,
+) {
+    let [a_means, _, a_scales, a_opacity, a_sh] = adam;
+    a_means.step(&mut m.means, &canon.means, HP, c.track_lr_means);
+    a_scales.step(&mut m.log_scales, &canon.log_scales, HP, c.track_lr_scales);
+    a_opacity.step(
+        &mut m.opacity_logits,
+        &g.opacity_logits,
+        HP,
+        c.track_lr_opacity,
+    );
+    let lr_dc = c.track_lr_colors;
+    a_sh.step_rows(&mut m.sh, &g.colors, HP, ROWS[4], |k| {
+        if k < 3 {
+            lr_dc
+        } else {
+            0.0
+        }
+    });
+}
+
+/// Constant-velocity prediction of knot `k` from knots `k−1` and `k−2` (a copy of knot
+/// `k−1` when it is the second view).
+pub(super) fn predict_knot(tr: &mut Trajectory, k: usize) {
+    let (p1, q1) = (
+        tr.translations[k - 1],
+        quat::normalize(&tr.rotations[k - 1]).0,
+    );
+    if k < 2 {
+        tr.translations[k] = p1;
+        tr.rotations[k] = q1;
+        return;
+    }
+    let (p0, q0) = (
+        tr.translations[k - 2],
+        quat::normalize(&tr.rotations[k - 2]).0,
+    );
+    let dt0 = tr.times[k - 1] - tr.times[k - 2];
+    let f = if dt0 > 0.0 {
+        (tr.times[k] - tr.times[k - 1]) / dt0
+    } else {
+        0.0
+    };
+    tr.translations[k] = std::array::from_fn(|c| p1[c] + f * (p1[c] - p0[c]));
+    // Angular velocity: the step q1·q0⁻¹ (world frame), repeated f times.
+    let step = quat::to_rotvec(quat::mul(q1, quat::conj(q0))).map(|v| v * f);
+    tr.rotations[k] = quat::mul(quat::from_rotvec(step), q1);
+}
+
 /// IoU of `alpha > ½` with the pixels of `id` in `id_map` (1 when both are empty).
-fn iou(alpha: &[f32], id_map: &[u8], id: u8) -> f32 {
+pub(super) fn iou(alpha: &[f32], id_map: &[u8], id: u8) -> f32 {
     let (mut both, mut either) = (0u32, 0u32);
     for (&a, &m) in alpha.iter().zip(id_map) {
         let (r, k) = (a > 0.5, m == id);
@@ -724,19 +742,20 @@ pub fn fit(
     rng: &mut impl Rng,
 ) -> Result<Tracked, splat::SplatError> {
     let mut best: Option<(f32, Tracker)> = None;
-    let mut evidence = (0.0, StillEvidence::default());
+    let mut evidence = (0.0, StillEvidence::default(), None);
     for (i, &th) in cfg.lift_thickness.iter().enumerate() {
         let mut t = Tracker::new(views, id, name, lift(th), cfg);
         t.sequential(rng)?;
         if i == 0 {
             let still = t.still_scale();
+            t.still_gauge = still;
             tracing::debug!(object = name, evidence = ?t.still, is_static = still.is_some(), "static test");
             if let Some(s) = still {
                 if t.hold_still_if_it_fits(s)? {
                     return t.finish();
                 }
             }
-            evidence = (t.residual_motion, t.still);
+            evidence = (t.residual_motion, t.still, still);
         }
         let loss = t.mean_loss()?;
         tracing::debug!(
@@ -762,7 +781,7 @@ pub fn fit(
     }
     t.settle_contact(1.0, rng)?;
     // The static test ran on the first thickness's track; report what it measured there.
-    (t.residual_motion, t.still) = evidence;
+    (t.residual_motion, t.still, t.still_gauge) = evidence;
     t.finish()
 }
 
@@ -780,6 +799,9 @@ pub struct Tracked {
     pub residual_motion: f32,
     /// What the static test measured.
     pub still: StillEvidence,
+    /// The gauge (relative to the lifted guess) under which its first track stood still,
+    /// when the motion measures called it still: where a still base of its parts stands.
+    pub still_gauge: Option<f32>,
     /// How well the rigid fit covers its masks ([`Tracker::mask_iou`]).
     pub mask_iou: f32,
     /// The readings of its gauge and the choice made from them (a moving object).
@@ -788,7 +810,7 @@ pub struct Tracked {
 }
 
 /// Largest side of the bounding box of `N·3` points.
-fn extent(means: &[f32]) -> f32 {
+pub(super) fn extent(means: &[f32]) -> f32 {
     let mut lo = [f32::INFINITY; 3];
     let mut hi = [f32::NEG_INFINITY; 3];
     for m in means.chunks_exact(3) {

@@ -12,8 +12,8 @@
 //!    each, rendered together against the mask and colour, neighbours held by [`joints`];
 //! 3. [`merge`]: clusters whose trajectories carry their Gaussians alike (relative motion
 //!    below `parts_merge` of the object's size) become one part, and each Gaussian joins
-//!    the part whose motion keeps it on its own colour inside the mask over the views; the
-//!    largest part is the body, which keeps the object's ID;
+//!    the part whose motion keeps it on its own colour inside the mask over the views; a
+//!    still base, else the largest part, is the body, which keeps the object's ID;
 //! 4. the parts are kept when two or more remain and they lower the mean tracking loss by
 //!    `parts_min_gain` against the rigid fit; otherwise the rigid fit stands unchanged, so
 //!    an object that moves as one comes out exactly as the rigid mode makes it.

@@ -309,7 +309,7 @@ impl<'a> PartsTracker<'a> {
 
     /// Merges the parts that move alike (`objects.parts_merge`), gives every Gaussian the
     /// part whose motion best explains it (`merge::reassign`), and numbers the parts by size
-    /// (0, the largest, is the body). Returns the number of parts left.
+    /// with a still base first (0 is the body). Returns the number of parts left.
     pub fn merge(&mut self) -> usize {
         let groups = self.groups_by_motion();
         // A group moves as its largest cluster.
@@ -334,9 +334,21 @@ impl<'a> PartsTracker<'a> {
             let refs: Vec<&Trajectory> = trajs.iter().collect();
             merge::reassign(&self.model, &mut labels, &refs, &views, self.id);
         }
-        // Number by size; a part the reassignment emptied is dropped.
+        // Number by size, a still base first (it is the body); a part the reassignment
+        // emptied is dropped.
         let mut sized = labels.clone();
         super::cluster::by_size(&mut sized);
+        if let Some(base) = labels.iter().zip(&sized).find(|(&l, _)| still[l as usize]) {
+            let base = *base.1;
+            for l in &mut sized {
+                // The base to 0, the parts before it one down the list.
+                *l = match (*l).cmp(&base) {
+                    std::cmp::Ordering::Equal => 0,
+                    std::cmp::Ordering::Less => *l + 1,
+                    std::cmp::Ordering::Greater => *l,
+                };
+            }
+        }
         let mut order = vec![usize::MAX; lead.len()];
         for (&old, &new) in labels.iter().zip(&sized) {
             order[new as usize] = old as usize;

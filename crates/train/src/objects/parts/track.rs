@@ -137,19 +137,20 @@ impl<'a> PartsTracker<'a> {
         self.knots = (0..k).map(|_| KnotAdam::zeros(self.views.len())).collect();
     }
 
-    /// One forward/backward on view `v` (returns the view's colour + mask loss); steps the view's knots and/or the Gaussians.
-    fn step(&mut self, v: usize, pose: bool, shape: bool) -> Result<f32, splat::SplatError> {
-        let view = &self.views[v];
+    /// The parts placed in the world at `time` (into `self.deformed`), and their poses.
+    fn place_at(&mut self, time: f32) -> Vec<Pose> {
         deform::apply(&self.model, None, &mut self.deformed);
         let mut poses = Vec::new();
-        place::place(
-            &self.parts,
-            &self.rows,
-            &self.model,
-            view.time,
-            &mut self.deformed,
-            &mut poses,
-        );
+        let (parts, rows, model) = (&self.parts, &self.rows, &self.model);
+        place::place(parts, rows, model, time, &mut self.deformed, &mut poses);
+        poses
+    }
+
+    /// One forward/backward on view `v` (returns the view's colour + mask loss); steps the
+    /// view's knots and/or the Gaussians.
+    fn step(&mut self, v: usize, pose: bool, shape: bool) -> Result<f32, splat::SplatError> {
+        let view = &self.views[v];
+        let poses = self.place_at(view.time);
         let g = deform::gaussians(&self.model, &self.deformed);
         let opts = RenderOptions::default();
         let out = self.raster.forward(&g, view.cam, &opts)?;
@@ -283,16 +284,7 @@ impl<'a> PartsTracker<'a> {
     pub fn mask_iou(&mut self) -> Result<f32, splat::SplatError> {
         let mut ious = Vec::with_capacity(self.views.len());
         for view in self.views {
-            deform::apply(&self.model, None, &mut self.deformed);
-            let mut poses = Vec::new();
-            place::place(
-                &self.parts,
-                &self.rows,
-                &self.model,
-                view.time,
-                &mut self.deformed,
-                &mut poses,
-            );
+            self.place_at(view.time);
             let g = deform::gaussians(&self.model, &self.deformed);
             let out = self
                 .raster

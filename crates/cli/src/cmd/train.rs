@@ -49,12 +49,22 @@ pub struct Args {
     /// Train the baseline without the regularizer (the default unless the config enables it).
     #[arg(long)]
     pub no_reg: bool,
-    /// Rigid objects (beyond the paper; docs/objects.md): every object of the ID maps
-    /// (`SCENE/semantics/`, made by `semdynreg segment`) becomes a rigid body with its own
-    /// trajectory, found from its masks; the rest keeps the deformation field. Overrides
-    /// `objects.enabled` of the config.
-    #[arg(long, conflicts_with = "no_objects")]
-    pub objects: bool,
+    /// Objects (beyond the paper; docs/objects.md): every object of the ID maps
+    /// (`SCENE/semantics/`, made by `semdynreg segment`) gets its own motion, found from its
+    /// masks; the rest keeps the deformation field. `--objects` alone: as the config says
+    /// (a rigid body each by default). `--objects=rigid`: one rigid body each.
+    /// `--objects=parts`: up to 4 rigid parts held at joints where they explain the views
+    /// better. `--objects=auto`: as parts, and an object that neither fit covers well
+    /// (median mask IoU < 0.8) stays with the field. Each object's start logs its evidence.
+    #[arg(
+        long,
+        conflicts_with = "no_objects",
+        num_args = 0..=1,
+        require_equals = true,
+        value_name = "MODE",
+        value_parser = clap::builder::ValueParser::new(|s: &str| s.parse::<train::objects::ObjectsMode>())
+    )]
+    pub objects: Option<Option<train::objects::ObjectsMode>>,
     /// Train without rigid objects (the default unless the config enables them).
     #[arg(long)]
     pub no_objects: bool,
@@ -82,8 +92,11 @@ fn new_config(a: &Args) -> Result<TrainConfig> {
     if a.reg || a.no_reg {
         cfg.reg.enabled = a.reg;
     }
-    if a.objects || a.no_objects {
-        cfg.objects.enabled = a.objects;
+    match a.objects {
+        Some(Some(mode)) => cfg.objects.apply_mode(mode),
+        Some(None) => cfg.objects.enabled = true,
+        None if a.no_objects => cfg.objects.enabled = false,
+        None => {}
     }
     if let Some(n) = a.parts {
         cfg.objects.parts = n;
@@ -145,7 +158,7 @@ fn resumed(a: &Args) -> Result<Trainer> {
         || a.iters.is_some()
         || a.reg
         || a.no_reg
-        || a.objects
+        || a.objects.is_some()
         || a.no_objects
         || a.parts.is_some()
         || a.checkpoint_minutes.is_some()
@@ -413,6 +426,29 @@ fn write_timings(tr: &Trainer, run: &Path, wall: f64, first: u32) -> Result<()> 
 #[cfg(test)]
 mod tests {
     use super::{copy_log_until, passed_mark};
+    use clap::Parser;
+    use train::objects::ObjectsMode;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        a: super::Args,
+    }
+
+    #[test]
+    fn objects_takes_a_mode_only_after_an_equals_sign() {
+        let parse = |argv: &[&str]| Cli::try_parse_from(argv).map(|c| c.a);
+        let a = parse(&["t", "--objects", "scene", "--out", "o"]).unwrap();
+        assert_eq!(a.objects, Some(None));
+        assert_eq!(a.scene.as_deref(), Some(std::path::Path::new("scene")));
+        let a = parse(&["t", "scene", "--out", "o", "--objects=auto"]).unwrap();
+        assert_eq!(a.objects, Some(Some(ObjectsMode::Auto)));
+        let cfg = super::new_config(&a).unwrap();
+        assert!(cfg.objects.enabled && cfg.objects.parts > 1 && cfg.objects.min_rigid_iou > 0.0);
+        assert!(parse(&["t", "scene", "--out", "o", "--objects=field"]).is_err());
+        let a = parse(&["t", "scene", "--out", "o"]).unwrap();
+        assert!(!super::new_config(&a).unwrap().objects.enabled);
+    }
 
     #[test]
     fn a_log_cut_by_a_kill_resumes_and_a_damaged_log_is_refused() {

@@ -46,7 +46,7 @@ pub mod track;
 pub mod trajectory;
 pub mod truth;
 
-pub use config::ObjectsConfig;
+pub use config::{ObjectsConfig, ObjectsMode};
 pub use place::NO_OBJECT;
 pub use select::{SelectMode, Selection};
 pub use trajectory::{Pose, Trajectory};

@@ -61,6 +61,9 @@ impl ObjectsFile {
     /// Reads and checks `objects.json` (one finite matrix per object in every frame).
     pub fn load(path: &Path) -> Result<Self, SceneError> {
         let f: Self = crate::io::read_json(path)?;
+        if let Some(msg) = f.parent_problem() {
+            return Err(SceneError::invalid(path, msg));
+        }
         for (i, fr) in f.frames.iter().enumerate() {
             if fr.object_to_world.len() != f.objects.len() {
                 return Err(SceneError::invalid(
@@ -91,6 +94,24 @@ impl ObjectsFile {
             }
         }
         Ok(f)
+    }
+
+    /// A part must hang from the body or from a part listed before it (so the links form a
+    /// tree that a walk in list order can pose).
+    fn parent_problem(&self) -> Option<String> {
+        self.objects.iter().find_map(|o| {
+            o.parts.iter().enumerate().find_map(|(j, p)| {
+                let bad = p.parent.is_some_and(|q| q >= j);
+                bad.then(|| {
+                    format!(
+                        "part {j} ({}) of {} hangs from part {}, which does not come before it",
+                        p.name,
+                        o.name,
+                        p.parent.unwrap_or_default()
+                    )
+                })
+            })
+        })
     }
 
     /// What is wrong with a frame's part matrices against the objects' parts, if anything.

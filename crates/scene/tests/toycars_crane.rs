@@ -115,7 +115,8 @@ fn the_crane_records_and_renders_its_parts() {
     assert!(bucket_seen, "the bucket shows in some frame's part map");
 }
 
-/// A file whose frames lack a part's matrix is refused with the object named.
+/// A file whose frames lack a part's matrix, or whose parts do not form a tree, is refused
+/// with the object named.
 #[test]
 fn part_matrices_must_match_the_parts() {
     let dir = tempfile::tempdir().unwrap();
@@ -135,4 +136,19 @@ fn part_matrices_must_match_the_parts() {
     objects.save(&path).unwrap();
     let err = ObjectsFile::load(&path).unwrap_err().to_string();
     assert!(err.contains("frame 1: `part_to_world` is missing"), "{err}");
+    // A part hanging from itself (or from a later part) does not make a tree.
+    generate(&cfg, dir.path(), &|_, _| {}).unwrap();
+    let mut objects = ObjectsFile::load(&path).unwrap();
+    let crane = objects
+        .objects
+        .iter_mut()
+        .find(|o| !o.parts.is_empty())
+        .unwrap();
+    crane.parts[0].parent = Some(0);
+    objects.save(&path).unwrap();
+    let err = ObjectsFile::load(&path).unwrap_err().to_string();
+    assert!(
+        err.contains("part 0") && err.contains("does not come before it"),
+        "{err}"
+    );
 }

@@ -193,7 +193,8 @@ pub const MODE_PARTS: usize = 4;
 /// `auto`'s `min_rigid_iou`. Rigid fits of rigid objects cover their masks with a median
 /// IoU of 0.88–0.99 (toycars' vehicles 0.97–0.98; 26 of the generated benchmark's 28
 /// objects; the other two are a slow mover wrongly held still, 0.60, and a still barrel,
-/// 0.79); the real capture's hand, which bends, 0.71 (docs/objects.md, docs/real-data.md).
+/// 0.79); the real capture's hand, which bends, 0.71–0.74 (docs/objects.md,
+/// docs/real-data.md).
 pub const AUTO_MIN_RIGID_IOU: f32 = 0.8;
 
 impl ObjectsMode {

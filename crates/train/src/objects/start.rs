@@ -196,10 +196,11 @@ pub fn start(
         let unplaced = !f.is_static && confidence < node.cfg.min_scale_confidence;
         let left_to_field = not_rigid || unplaced;
         if not_rigid {
-            tracing::warn!(object = %name, mask_iou = f.mask_iou, is_static = f.is_static,
-                min_rigid_iou = node.cfg.min_rigid_iou,
-                "not a rigid body: one rigid shape covers its masks with a median IoU below \
-                 objects.min_rigid_iou, so the deformation field keeps it");
+            tracing::warn!(object = %name, mask_iou = iou, rigid_mask_iou = f.mask_iou,
+                is_static = f.is_static, min_rigid_iou = node.cfg.min_rigid_iou,
+                "not a rigid body: its fit (one rigid shape, or its parts where they were kept) \
+                 covers its masks with a median IoU below objects.min_rigid_iou, so the \
+                 deformation field keeps it");
         } else if unplaced {
             tracing::warn!(object = %name, confidence,
                 min_scale_confidence = node.cfg.min_scale_confidence,

@@ -7,7 +7,7 @@
 //! ```text
 //! cargo run --release -p train --example objects_bench -- OUT [--scenes 20] [--first 0]
 //!     [--config FILE] [--tag NAME] [--iters 3000] [--points 20000]
-//!     [--width 160] [--height 120] [--frames 96]
+//!     [--width 160] [--height 120] [--frames 96] [--seed 0]
 //! ```
 //!
 //! Each scene trains the baseline's schedule (rescaled to `--iters`, rigid objects on,
@@ -15,7 +15,9 @@
 //! object. Resumable: scenes are generated once into `OUT/scenes/`, each scene's result is
 //! `OUT/TAG/seed-NNN.json` and is kept; rerunning scores only what is missing and rewrites
 //! `OUT/TAG/summary.md` from every result there. `--config` with another `[objects]` (say
-//! `ring_gauge = true`) under another `--tag` compares gauges on the same scenes.
+//! `ring_gauge = true`) under another `--tag` compares gauges on the same scenes; `--seed`
+//! (the training's seed: initial points, view order) under another `--tag` measures how far
+//! the counts move with nothing but the seed changed.
 
 use scene::toycars::{generate, ground_truth_id_maps, varied};
 use std::path::{Path, PathBuf};
@@ -33,6 +35,7 @@ struct Opts {
     points: usize,
     size: (u32, u32),
     frames: usize,
+    seed: u64,
 }
 
 fn parse() -> Result<Opts, String> {
@@ -47,6 +50,7 @@ fn parse() -> Result<Opts, String> {
         points: 20_000,
         size: (160, 120),
         frames: 96,
+        seed: 0,
     };
     let mut out = None;
     while let Some(a) = args.next() {
@@ -62,6 +66,7 @@ fn parse() -> Result<Opts, String> {
             "--width" => o.size.0 = num(val(&a)?, &a)? as u32,
             "--height" => o.size.1 = num(val(&a)?, &a)? as u32,
             "--frames" => o.frames = num(val(&a)?, &a)? as usize,
+            "--seed" => o.seed = num(val(&a)?, &a)?,
             s if s.starts_with("--") => return Err(format!("unknown option {s}")),
             s => out = Some(PathBuf::from(s)),
         }
@@ -134,7 +139,7 @@ fn scene_dir(o: &Opts, seed: u64) -> Res<(PathBuf, Vec<String>)> {
 fn start_and_score(o: &Opts, dir: &Path) -> Res<Vec<ObjectScore>> {
     let mut cfg = TrainConfig::for_run(o.config.as_deref(), Some(o.iters))?;
     cfg.init.random_points = o.points;
-    Ok(train::objects_bench::start_and_score(dir, cfg, 0)?)
+    Ok(train::objects_bench::start_and_score(dir, cfg, o.seed)?)
 }
 
 fn brief(s: &ObjectScore) -> String {

@@ -91,6 +91,13 @@ pub struct ObjectsConfig {
     /// and again after each of `contact_rounds` corrections of its distance by contact.
     pub track_refine_iters: u32,
     pub contact_rounds: u32,
+    /// After each joint refinement the knots are replaced by their Whittaker–Eilers smooth
+    /// (`smooth.rs`): `gcv` chooses each track's penalty by generalized cross-validation,
+    /// `period` halves a period of `track_smooth_period` of the track, `off` keeps the
+    /// knots as tracked (the default: on the benchmark smoothing shortens over-long paths
+    /// but moves no count by more than the seed-to-seed spread, docs/objects.md).
+    pub track_smooth: super::smooth::SmoothRule,
+    pub track_smooth_period: f32,
     /// Weight of the spring that holds each view's distance to the camera at its contact
     /// target while refining (`contact.rs`).
     pub contact_weight: f32,
@@ -151,6 +158,8 @@ impl Default for ObjectsConfig {
             track_pose_iters: 30,
             track_shape_iters: 10,
             track_refine_iters: 1000,
+            track_smooth: super::smooth::SmoothRule::Off,
+            track_smooth_period: 0.4,
             contact_rounds: 0,
             contact_weight: 30.0,
             track_lr_translation: 2e-3,
@@ -198,6 +207,9 @@ pub const MODE_PARTS: usize = 4;
 pub const AUTO_MIN_RIGID_IOU: f32 = 0.8;
 
 impl ObjectsMode {
+    /// Every mode, in the order `--help` and the error list them.
+    pub const ALL: [ObjectsMode; 3] = [ObjectsMode::Rigid, ObjectsMode::Parts, ObjectsMode::Auto];
+
     /// The mode's name on the command line.
     pub fn name(self) -> &'static str {
         match self {
@@ -211,10 +223,16 @@ impl ObjectsMode {
 impl std::str::FromStr for ObjectsMode {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        [ObjectsMode::Rigid, ObjectsMode::Parts, ObjectsMode::Auto]
+        ObjectsMode::ALL
             .into_iter()
             .find(|m| m.name() == s.trim())
-            .ok_or_else(|| format!("{s:?} is not an objects mode: use rigid, parts or auto"))
+            .ok_or_else(|| {
+                let names: Vec<&str> = ObjectsMode::ALL.iter().map(|m| m.name()).collect();
+                format!(
+                    "{s:?} is not an objects mode: use one of {}",
+                    names.join(", ")
+                )
+            })
     }
 }
 
@@ -273,6 +291,14 @@ impl ObjectsConfig {
             return Err(format!(
                 "objects.gauge_tolerance must be finite and > 0, got {}",
                 self.gauge_tolerance
+            ));
+        }
+        if !(self.track_smooth_period.is_finite()
+            && (0.0..=1.0).contains(&self.track_smooth_period))
+        {
+            return Err(format!(
+                "objects.track_smooth_period must be in [0, 1], got {}",
+                self.track_smooth_period
             ));
         }
         if !(0.0..=1.0).contains(&self.static_iou_drop) {
@@ -381,13 +407,27 @@ mod tests {
 
     #[test]
     fn modes_parse_by_name_and_refuse_others() {
-        for m in [ObjectsMode::Rigid, ObjectsMode::Parts, ObjectsMode::Auto] {
+        for m in ObjectsMode::ALL {
             assert_eq!(m.name().parse::<ObjectsMode>(), Ok(m));
         }
         let e = "field".parse::<ObjectsMode>().unwrap_err();
         assert!(
-            e.contains("field") && e.contains("rigid, parts or auto"),
+            e.contains("field") && e.contains("one of rigid, parts, auto"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn track_smoothing_reads_by_name_and_checks_its_period() {
+        let c: ObjectsConfig = toml::from_str("track_smooth = \"gcv\"").unwrap();
+        assert_eq!(c.track_smooth, super::super::smooth::SmoothRule::Gcv);
+        assert!(c.validate().is_ok());
+        assert!(toml::from_str::<ObjectsConfig>("track_smooth = \"spline\"").is_err());
+        let c = ObjectsConfig {
+            track_smooth_period: 1.5,
+            ..ObjectsConfig::default()
+        };
+        let e = c.validate().unwrap_err();
+        assert!(e.contains("objects.track_smooth_period"), "{e}");
     }
 }

@@ -40,6 +40,7 @@ pub mod place;
 pub mod regauge;
 pub mod scale;
 pub mod select;
+pub mod smooth;
 pub mod start;
 pub mod store;
 pub mod track;

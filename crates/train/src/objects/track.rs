@@ -279,11 +279,16 @@ impl<'a> Tracker<'a> {
         Ok(Some((s, slope)))
     }
 
-    /// Joint refinement of shape, appearance and every pose on views drawn uniformly.
+    /// Joint refinement of shape, appearance and every pose on views drawn uniformly, then
+    /// the knots smoothed (`objects.track_smooth`).
     fn refine(&mut self, rng: &mut impl Rng) -> Result<(), splat::SplatError> {
         for _ in 0..self.cfg.track_refine_iters {
             let j = rng.gen_range(0..self.views.len());
             self.step(j, true, true)?;
+        }
+        if let Some(amount) = self.cfg.track_smooth.amount(self.cfg.track_smooth_period) {
+            let lambdas = super::smooth::smooth(&mut self.object.trajectory, amount);
+            tracing::debug!(object = %self.object.name, ?lambdas, "track smoothed");
         }
         Ok(())
     }

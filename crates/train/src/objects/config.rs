@@ -93,7 +93,8 @@ pub struct ObjectsConfig {
     pub contact_rounds: u32,
     /// After each joint refinement the knots are replaced by their Whittaker–Eilers smooth
     /// (`smooth.rs`): `gcv` chooses each track's penalty by generalized cross-validation,
-    /// `period` halves a period of `track_smooth_period` of the track, `off` keeps the
+    /// `period` halves a period of `track_smooth_period` of the track, `rays` does so
+    /// trusting each knot along its view's ray only `(size / distance)²`, `off` keeps the
     /// knots as tracked (the default: on the benchmark smoothing shortens over-long paths
     /// but moves no count by more than the seed-to-seed spread, docs/objects.md).
     pub track_smooth: super::smooth::SmoothRule,
@@ -422,6 +423,8 @@ mod tests {
         let c: ObjectsConfig = toml::from_str("track_smooth = \"gcv\"").unwrap();
         assert_eq!(c.track_smooth, super::super::smooth::SmoothRule::Gcv);
         assert!(c.validate().is_ok());
+        let c: ObjectsConfig = toml::from_str("track_smooth = \"rays\"").unwrap();
+        assert_eq!(c.track_smooth, super::super::smooth::SmoothRule::Rays);
         assert!(toml::from_str::<ObjectsConfig>("track_smooth = \"spline\"").is_err());
         let c = ObjectsConfig {
             track_smooth_period: 1.5,

@@ -11,7 +11,9 @@
 //!
 //! The smoother's gain is `1 / (1 + λ (2 − 2 cos ω)²)`: it halves a period of
 //! `2π λ^{1/4}` knots. [`smooth`] takes that period as a fraction of the track's knots, so
-//! the same setting means the same thing at any frame count.
+//! the same setting means the same thing at any frame count. [`smooth_along_rays`] weighs
+//! each knot's data term by how well its view fixes it: across the ray fully, along it
+//! (the distance) by `(size / distance)²`.
 
 use super::trajectory::Trajectory;
 
@@ -144,17 +146,9 @@ pub enum SmoothRule {
     Gcv,
     /// A half-gain period of `track_smooth_period` of the track.
     Period,
-}
-
-impl SmoothRule {
-    /// The amount to smooth by, None for `Off`.
-    pub fn amount(self, period: f32) -> Option<Amount> {
-        match self {
-            Self::Off => None,
-            Self::Gcv => Some(Amount::Gcv),
-            Self::Period => Some(Amount::Period(period)),
-        }
-    }
+    /// As `Period`, but each knot's position is trusted across its view's ray and hardly
+    /// along it ([`smooth_along_rays`]): the distance is what one view fixes least.
+    Rays,
 }
 
 /// How much [`smooth`] smooths.
@@ -194,6 +188,106 @@ pub fn smooth(tr: &mut Trajectory, amount: Amount) -> Lambdas {
     }
     let lr = smooth_rotations(tr, amount);
     (lt, lr)
+}
+
+/// The translations smoothed with a data term that trusts each knot across the ray from
+/// its view's camera centre and only `(extent / distance)²` of that along it:
+/// `z = argmin Σ_k (z_k − y_k)ᵀ W_k (z_k − y_k) + λ Σ_k |Δ²z_k|²` with
+/// `W_k = I − (1 − ε_k) r_k r_kᵀ`. One view places an object across the image to about a
+/// pixel but its distance only through its apparent size, about a pixel of its size in
+/// pixels: the variance ratio is `(size / distance)²`, the same for any focal length. Along
+/// the rays the smoothness prior then decides. Rotations as [`smooth`] with the same
+/// period. Returns λ.
+pub fn smooth_along_rays(
+    tr: &mut Trajectory,
+    centres: &[[f32; 3]],
+    extent: f32,
+    fraction: f32,
+) -> f64 {
+    let k = tr.len();
+    let lambda = lambda_for(fraction, k);
+    if k < 3 || lambda <= 0.0 || centres.len() != k {
+        return 0.0;
+    }
+    let n = 3 * k;
+    // Band of A below the diagonal: a[u][d] = A[u][u − d], d ≤ 8 (two knots of 3 rows).
+    const B: usize = 8;
+    let mut a = vec![[0.0f64; B + 1]; n];
+    let mut rhs = vec![0.0f64; n];
+    for (i, (p, c)) in tr.translations.iter().zip(centres).enumerate() {
+        let v: [f64; 3] = std::array::from_fn(|j| f64::from(p[j] - c[j]));
+        let dist = v.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-9);
+        let r = v.map(|x| x / dist);
+        let eps = (f64::from(extent) / dist).powi(2).min(1.0);
+        for row in 0..3 {
+            for col in 0..=row {
+                let w = f64::from(u8::from(row == col)) - (1.0 - eps) * r[row] * r[col];
+                a[3 * i + row][row - col] += w;
+                rhs[3 * i + row] += w * f64::from(p[col]);
+                if row != col {
+                    rhs[3 * i + col] += w * f64::from(p[row]);
+                }
+            }
+        }
+    }
+    // λ DᵀD ⊗ I₃: row r of D is (1, −2, 1) at knots r, r+1, r+2.
+    let stencil = [1.0, -2.0, 1.0];
+    for r in 0..k - 2 {
+        for i in 0..3 {
+            for j in 0..=i {
+                let v = lambda * stencil[i] * stencil[j];
+                for c in 0..3 {
+                    a[3 * (r + i) + c][3 * (i - j)] += v;
+                }
+            }
+        }
+    }
+    banded_cholesky_solve(&mut a, &mut rhs);
+    for (i, p) in tr.translations.iter_mut().enumerate() {
+        *p = std::array::from_fn(|j| rhs[3 * i + j] as f32);
+    }
+    smooth_rotations(tr, Amount::Period(fraction));
+    lambda
+}
+
+/// Solves `A x = b` in place for a symmetric positive definite `A` given by its lower band
+/// (`a[u][d] = A[u][u − d]`), by the banded Cholesky factorization `A = LLᵀ`.
+fn banded_cholesky_solve<const W: usize>(a: &mut [[f64; W]], b: &mut [f64]) {
+    let n = b.len();
+    let bw = W - 1;
+    for u in 0..n {
+        for d in (0..=bw.min(u)).rev() {
+            let v = u - d;
+            // L[u][v] = (A[u][v] − Σ_{w<v} L[u][w] L[v][w]) / L[v][v]
+            let mut sum = a[u][d];
+            for e in d + 1..=bw.min(u) {
+                let w = u - e;
+                if v - w > bw {
+                    continue;
+                }
+                sum -= a[u][e] * a[v][v - w];
+            }
+            a[u][d] = if d == 0 {
+                sum.max(1e-300).sqrt()
+            } else {
+                sum / a[v][0]
+            };
+        }
+    }
+    for u in 0..n {
+        let mut s = b[u];
+        for d in 1..=bw.min(u) {
+            s -= a[u][d] * b[u - d];
+        }
+        b[u] = s / a[u][0];
+    }
+    for u in (0..n).rev() {
+        let mut s = b[u];
+        for d in 1..=bw.min(n - 1 - u) {
+            s -= a[u + d][d] * b[u + d];
+        }
+        b[u] = s / a[u][0];
+    }
 }
 
 fn smooth_rotations(tr: &mut Trajectory, amount: Amount) -> f64 {
@@ -389,6 +483,71 @@ mod tests {
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
         assert!(moved < 0.2, "{moved}");
+    }
+
+    #[test]
+    fn along_the_rays_the_prior_decides_and_across_them_the_data() {
+        // Cameras on a line looking at a still object; its knots wobble along the rays
+        // (towards and away from each camera) and a little across them.
+        let k = 30;
+        let truth = [0.0f32, 0.0, 5.0];
+        let centres: Vec<[f32; 3]> = (0..k).map(|i| [i as f32 * 0.1 - 1.5, 0.0, 0.0]).collect();
+        let translations: Vec<[f32; 3]> = centres
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                let v: [f32; 3] = std::array::from_fn(|j| truth[j] - c[j]);
+                let d = v.iter().map(|x| x * x).sum::<f32>().sqrt();
+                let along = if i % 2 == 0 { 0.3 } else { -0.3 };
+                std::array::from_fn(|j| truth[j] + along * v[j] / d)
+            })
+            .collect();
+        let mut tr = Trajectory {
+            times: (0..k).map(|i| i as f32).collect(),
+            translations: translations.clone(),
+            rotations: vec![[1.0, 0.0, 0.0, 0.0]; k],
+        };
+        let mut iso = tr.clone();
+        smooth_along_rays(&mut tr, &centres, 0.3, 0.1);
+        smooth(&mut iso, Amount::Period(0.1));
+        let err = |t: &Trajectory| -> f32 {
+            t.translations
+                .iter()
+                .map(|p| (0..3).map(|j| (p[j] - truth[j]).powi(2)).sum::<f32>())
+                .sum::<f32>()
+        };
+        let before = err(&Trajectory {
+            translations,
+            ..tr.clone()
+        });
+        assert!(err(&tr) < 0.05 * before, "{} vs {before}", err(&tr));
+        assert!(err(&tr) < 0.5 * err(&iso), "{} vs {}", err(&tr), err(&iso));
+    }
+
+    #[test]
+    fn the_banded_cholesky_matches_the_dense_solve() {
+        // The pentadiagonal Whittaker system through the generic banded solver.
+        let n = 12;
+        let lambda = 7.0;
+        let y: Vec<f64> = (0..n).map(|i| ((i * 31) % 7) as f64).collect();
+        let mut a = vec![[0.0f64; 3]; n];
+        for (u, row) in a.iter_mut().enumerate() {
+            row[0] = 1.0;
+            let _ = u;
+        }
+        let st = [1.0, -2.0, 1.0];
+        for r in 0..n - 2 {
+            for i in 0..3 {
+                for j in 0..=i {
+                    a[r + i][i - j] += lambda * st[i] * st[j];
+                }
+            }
+        }
+        let mut b = y.clone();
+        banded_cholesky_solve(&mut a, &mut b);
+        for (x, d) in b.iter().zip(dense(&y, lambda)) {
+            assert!((x - d).abs() < 1e-9, "{x} vs {d}");
+        }
     }
 
     #[test]

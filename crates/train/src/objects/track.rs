@@ -286,11 +286,27 @@ impl<'a> Tracker<'a> {
             let j = rng.gen_range(0..self.views.len());
             self.step(j, true, true)?;
         }
-        if let Some(amount) = self.cfg.track_smooth.amount(self.cfg.track_smooth_period) {
-            let lambdas = super::smooth::smooth(&mut self.object.trajectory, amount);
-            tracing::debug!(object = %self.object.name, ?lambdas, "track smoothed");
-        }
+        self.smooth_knots();
         Ok(())
+    }
+
+    /// The knots replaced by their smooth (`objects.track_smooth`, `smooth.rs`).
+    fn smooth_knots(&mut self) {
+        use super::smooth::{smooth, smooth_along_rays, Amount, SmoothRule};
+        let tr = &mut self.object.trajectory;
+        let period = self.cfg.track_smooth_period;
+        let lambdas = match self.cfg.track_smooth {
+            SmoothRule::Off => return,
+            SmoothRule::Gcv => smooth(tr, Amount::Gcv),
+            SmoothRule::Period => smooth(tr, Amount::Period(period)),
+            SmoothRule::Rays => {
+                let centres: Vec<[f32; 3]> = self.views.iter().map(|v| v.cam.center()).collect();
+                let size = extent(&self.model.means);
+                let l = smooth_along_rays(tr, &centres, size, period);
+                (l, l)
+            }
+        };
+        tracing::debug!(object = %self.object.name, ?lambdas, "track smoothed");
     }
 
     fn predict(&mut self, k: usize) {

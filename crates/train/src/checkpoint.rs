@@ -471,6 +471,8 @@ pub struct LoadedModel {
     pub iteration: u32,
     /// The object column (which node owns each Gaussian) and the nodes that place them.
     pub column: Vec<u8>,
+    /// The per-Gaussian rows kept beside the parameters (skinning weights, votes).
+    pub aux: Vec<AuxRows>,
     pub nodes: Nodes,
 }
 
@@ -480,6 +482,7 @@ impl LoadedModel {
         Scene {
             model: &self.model,
             column: &self.column,
+            aux: &self.aux,
             nodes: &mut self.nodes,
             iteration: self.iteration,
         }
@@ -565,11 +568,13 @@ pub fn load_model(dir: &Path) -> Result<LoadedModel> {
     let (model, column) = read_rows(&sf, dir)?;
     let nodes = read_nodes(&sf, &cfg, None)?;
     check_column(&sf, &column, &nodes)?;
+    let aux = read_aux(&sf, model.len())?;
     Ok(LoadedModel {
         cfg,
         model,
         iteration: sf.meta("iteration")?,
         column,
+        aux,
         nodes,
     })
 }

@@ -12,7 +12,7 @@ use crate::error::Result;
 use crate::field::{DeformField, DeformOutput, FieldConfig};
 use crate::finite::first_nonfinite;
 use crate::node::{At, Deformation, Node, Rows, SectionReader, SectionWriter};
-use crate::state::NO_OBJECT;
+use crate::state::{AuxStore, NO_OBJECT};
 use crate::timing::{Phase, StepTimings};
 use splat::Gradients;
 use std::any::Any;
@@ -148,7 +148,7 @@ impl Node for FieldNode {
         tm.record(Phase::FieldBackward, t0);
     }
 
-    fn step(&mut self, iteration: u32, hp: AdamHyper) -> bool {
+    fn step(&mut self, iteration: u32, hp: AdamHyper, _aux: &mut AuxStore<'_>) -> bool {
         if !self.active_at(iteration) {
             return true;
         }

@@ -21,18 +21,20 @@ use crate::deform::{CanonicalGrads, Deformed};
 use crate::error::{Result, TrainError};
 use crate::field::DeformOutput;
 use crate::model::GaussianModel;
-use crate::state::{AuxStore, GaussianState};
+use crate::state::{AuxRows, AuxStore, GaussianState};
 use crate::timing::StepTimings;
 use rand_chacha::ChaCha8Rng;
 use splat::{Camera, Gradients};
 use std::any::Any;
 use std::path::PathBuf;
 
-/// The store as the nodes see it: parameters and the object column.
+/// The store as the nodes see it: parameters, the object column and the per-Gaussian
+/// rows nodes and hooks keep beside them ([`AuxRows`], e.g. skinning weights).
 #[derive(Clone, Copy)]
 pub struct Rows<'a> {
     pub model: &'a GaussianModel,
     pub column: &'a [u8],
+    pub aux: &'a [AuxRows],
 }
 
 /// Where and when the nodes place their rows.
@@ -174,9 +176,9 @@ pub trait Node: Any + Send + Sync {
         tm: &mut StepTimings,
     );
 
-    /// Adam on the node's own parameters at iteration `iteration`; whether every value
-    /// written is finite.
-    fn step(&mut self, iteration: u32, hp: AdamHyper) -> bool;
+    /// Adam on the node's own parameters at iteration `iteration` (including those it keeps
+    /// in the store's per-Gaussian rows, `aux`); whether every value written is finite.
+    fn step(&mut self, iteration: u32, hp: AdamHyper, aux: &mut AuxStore<'_>) -> bool;
 
     /// Clears `placed[i]` for this node's rows that this step's placement left at rest
     /// (rows culled from the view): their placed geometry is not where they draw.

@@ -24,6 +24,8 @@ pub struct Renderer {
 pub struct Scene<'a> {
     pub model: &'a GaussianModel,
     pub column: &'a [u8],
+    /// The per-Gaussian rows nodes keep beside the parameters (skinning weights).
+    pub aux: &'a [crate::state::AuxRows],
     pub nodes: &'a mut Nodes,
     pub iteration: u32,
 }
@@ -34,6 +36,7 @@ impl Scene<'_> {
         let rows = Rows {
             model: self.model,
             column: self.column,
+            aux: self.aux,
         };
         let at = At {
             time: t,
@@ -184,12 +187,18 @@ impl Renderer {
     ) -> Result<EvalReport> {
         let mut out = Vec::with_capacity(frames.len());
         let mut ssim_ws = metrics::SsimWorkspace::new();
-        let (model, column, nodes, iteration) =
-            (scene.model, scene.column, scene.nodes, scene.iteration);
+        let (model, column, aux, nodes, iteration) = (
+            scene.model,
+            scene.column,
+            scene.aux,
+            scene.nodes,
+            scene.iteration,
+        );
         for fr in frames {
             let scene = Scene {
                 model,
                 column,
+                aux,
                 nodes: &mut *nodes,
                 iteration,
             };

@@ -154,6 +154,7 @@ impl Trainer {
         let scene = crate::render::Scene {
             model: &self.state.model,
             column: &self.state.object,
+            aux: &self.state.aux,
             nodes: &mut self.nodes,
             iteration: self.iteration,
         };
@@ -204,6 +205,7 @@ impl Trainer {
         let rows = Rows {
             model: &self.state.model,
             column: &self.state.object,
+            aux: &self.state.aux,
         };
         self.nodes.place(rows, &at, &mut self.ws.deformed, &mut tm);
         let (loss, psnr, extra_loss) = self.render_and_loss(fi, it, topk, &mut hook, &mut tm)?;
@@ -376,6 +378,7 @@ impl Trainer {
         let rows = Rows {
             model,
             column: &self.state.object,
+            aux: &self.state.aux,
         };
         for node in self.nodes.iter_mut() {
             node.backward(rows, &ws.grads, &mut ws.canon, tm);
@@ -418,8 +421,9 @@ impl Trainer {
         if plan.step_gaussians {
             finite &= self.adam_gaussians(lr_means, hp, plan.step_opacity);
         }
+        let mut aux = crate::state::AuxStore::new(&mut self.state.aux, self.state.model.len());
         for node in self.nodes.iter_mut() {
-            finite &= node.step(it, hp);
+            finite &= node.step(it, hp, &mut aux);
         }
         tm.record(Phase::Optimizer, t0);
         let t0 = std::time::Instant::now();

@@ -15,6 +15,7 @@ fn train_psnr(tr: &mut Trainer) -> f64 {
     let scene = train::render::Scene {
         model: &tr.state.model,
         column: &tr.state.object,
+        aux: &tr.state.aux,
         nodes: &mut tr.nodes,
         iteration: tr.iteration,
     };
@@ -488,4 +489,72 @@ fn holding_still_must_not_cost_the_masks_overlap() {
         kept_moving > 0,
         "a mover held still loses overlap: {checked:?}"
     );
+}
+
+/// Articulated objects in training: vehicles forced into two parts each (no merging, no
+/// gain required) get skinning rows; a run stopped and resumed ends bit-identical to an
+/// uninterrupted one (logits and their moments ride in the store's rows), the columns
+/// stay on their objects' parts, and the checkpoint renders what the trainer renders.
+#[test]
+fn skinned_parts_survive_densify_resume_and_render_from_a_checkpoint() {
+    let mut cfg = common::small_config(80);
+    cfg.objects.enabled = true;
+    cfg.objects.start_iter = 20;
+    (cfg.objects.lift_points, cfg.objects.lift_thickness) = (300, vec![0.25]);
+    (cfg.objects.track_pose_iters, cfg.objects.track_shape_iters) = (5, 2);
+    cfg.objects.track_refine_iters = 20;
+    (
+        cfg.objects.parts,
+        cfg.objects.parts_merge,
+        cfg.objects.parts_min_gain,
+    ) = (2, 0.0, 0.0);
+    cfg.validate().unwrap();
+    let ds = scene_with_id_maps();
+    let mut a = Trainer::new(cfg.clone(), ds.clone(), 7).unwrap();
+    for _ in 0..80 {
+        a.step().unwrap();
+    }
+    let node = a.nodes.get::<RigidObjects>().expect("objects started");
+    let groups = train::objects::parts::skin::groups(&node.objects);
+    assert!(
+        !groups.is_empty(),
+        "some vehicle kept two parts: {:?}",
+        node.start_reports
+    );
+    let skin = train::objects::parts::skin::rows_of(&a.state.aux).expect("skinning rows");
+    assert_eq!(skin.cols, 6, "two logits and their moments");
+    let ids: Vec<u8> = node.objects.iter().map(|o| o.id).collect();
+    assert!(a.state.object.iter().all(|c| *c == 255 || ids.contains(c)));
+    assert!(a.state.is_aligned());
+
+    let mut b = Trainer::new(cfg, ds.clone(), 7).unwrap();
+    for _ in 0..40 {
+        b.step().unwrap();
+    }
+    let run = tempfile::tempdir().unwrap();
+    let dir = checkpoint::save(&b, run.path()).unwrap();
+    drop(b);
+    let mut c = checkpoint::load_trainer(&dir, ds.clone()).unwrap();
+    for _ in 0..40 {
+        c.step().unwrap();
+    }
+    assert_bit_equal(&a, &c);
+    assert_eq!(a.state.object, c.state.object, "object column");
+
+    let dir = checkpoint::save(&c, run.path()).unwrap();
+    let mut loaded = checkpoint::load_model(&dir).unwrap();
+    let f = &ds.test[0];
+    let mut r = train::render::Renderer::default();
+    let scene = train::render::Scene {
+        model: &c.state.model,
+        column: &c.state.object,
+        aux: &c.state.aux,
+        nodes: &mut c.nodes,
+        iteration: c.iteration,
+    };
+    let want = r.render(scene, &f.camera, f.time, ds.background).unwrap();
+    let got = r
+        .render(loaded.scene(), &f.camera, f.time, ds.background)
+        .unwrap();
+    assert_eq!(want, got, "checkpoint render equals the trainer's");
 }

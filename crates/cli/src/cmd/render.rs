@@ -53,6 +53,8 @@ pub struct LoadedRun {
     /// per-Gaussian object column.
     pub objects: Vec<train::objects::RigidObject>,
     pub column: Vec<u8>,
+    /// The per-Gaussian rows the nodes keep beside the parameters (skinning weights).
+    pub aux: Vec<train::state::AuxRows>,
     /// The scene model's nodes, which place the Gaussians at any time.
     pub nodes: train::nodes::Nodes,
     pub dataset: scene::Dataset,
@@ -73,6 +75,7 @@ impl LoadedRun {
             model: m.model,
             iteration: m.iteration,
             column: m.column,
+            aux: m.aux,
             nodes: m.nodes,
             dataset,
             renderer: Renderer::default(),
@@ -84,6 +87,7 @@ impl LoadedRun {
         train::render::Scene {
             model: &self.model,
             column: &self.column,
+            aux: &self.aux,
             nodes: &mut self.nodes,
             iteration: self.iteration,
         }
@@ -91,6 +95,10 @@ impl LoadedRun {
 
     /// Keeps only the Gaussians `sel` keeps (the model shrinks to them, with their column).
     pub fn keep(&mut self, sel: &train::objects::Selection) {
+        let keep = sel.keep_mask(&self.column);
+        for a in &mut self.aux {
+            train::model::retain_rows(&mut a.data, a.cols, &keep);
+        }
         let (model, column) = sel.apply(&self.model, &self.column);
         self.model = model;
         self.column = column;
@@ -133,6 +141,7 @@ impl LoadedRun {
         let scene = train::render::Scene {
             model: &self.model,
             column: &self.column,
+            aux: &self.aux,
             nodes: &mut self.nodes,
             iteration: self.iteration,
         };
@@ -170,6 +179,7 @@ pub fn run(a: Args) -> Result<()> {
         let scene = train::render::Scene {
             model: &r.model,
             column: &r.column,
+            aux: &r.aux,
             nodes: &mut r.nodes,
             iteration: r.iteration,
         };

@@ -83,6 +83,20 @@ pub struct ObjectsConfig {
     /// between where the two parts carry their joint point, over the object's size²), while
     /// tracking and in training.
     pub joint_weight: f32,
+    /// Training of articulated objects (`parts/skin.rs`): each Gaussian is placed by a
+    /// blend of its object's part poses with learned weights (linear blend skinning, softmax
+    /// of one logit per part), starting from `exp(−d²/2σ²)` of its distance `d` to each
+    /// part's Gaussians, `σ = skin_radius ×` their median spacing; `skin_lr` is the logits'
+    /// Adam rate. false: each Gaussian moves with one part (piecewise rigid).
+    pub skin: bool,
+    pub skin_radius: f32,
+    pub skin_lr: f32,
+    /// Weight of the as-rigid-as-possible term between each skinned Gaussian and its
+    /// nearest neighbours on the same part (`parts/arap.rs`): the squared change of their
+    /// offset beyond the blended rotation, over the squared neighbour spacing. 0 (the
+    /// default) turns it off: at 0.01 and 0.1 it lowered the crane's crop by 0.2–0.3 dB
+    /// and the hand's by 0.2 dB (docs/objects.md).
+    pub arap_weight: f32,
     /// Tracking (time-progressive fitting): iterations of pose fitting per new frame, and of
     /// shape/appearance refinement on already tracked frames after each new frame.
     pub track_pose_iters: u32,
@@ -156,6 +170,10 @@ impl Default for ObjectsConfig {
             parts_merge: 0.1,
             parts_min_gain: 0.1,
             joint_weight: 10.0,
+            skin: true,
+            skin_radius: 2.0,
+            skin_lr: 0.01,
+            arap_weight: 0.0,
             track_pose_iters: 30,
             track_shape_iters: 10,
             track_refine_iters: 1000,
@@ -275,6 +293,7 @@ impl ObjectsConfig {
             ("objects.track_lr_rotation", self.track_lr_rotation),
             ("objects.lr_translation", self.lr_translation),
             ("objects.lr_rotation", self.lr_rotation),
+            ("objects.skin_radius", self.skin_radius),
         ];
         if !(self.static_ring_tolerance.is_finite() && self.static_ring_tolerance > 1.0) {
             return Err(format!(
@@ -342,6 +361,8 @@ impl ObjectsConfig {
             ("objects.lambda_mask", self.lambda_mask),
             ("objects.parts_merge", self.parts_merge),
             ("objects.joint_weight", self.joint_weight),
+            ("objects.skin_lr", self.skin_lr),
+            ("objects.arap_weight", self.arap_weight),
         ];
         for (name, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {

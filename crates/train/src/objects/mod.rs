@@ -15,8 +15,9 @@
 //!   by the occlusion gauge ([`gauge`]); its Gaussians join the training state with their
 //!   object in the state's object column;
 //! - every step: [`place`] puts object Gaussians in the world at the view's time and chains
-//!   the gradients back, [`mask_loss`] adds the alpha-against-mask term, [`knots`] steps
-//!   the trajectories;
+//!   the gradients back (articulated objects' rows by their skinning weights,
+//!   `parts::skin`, with `parts::arap` between neighbours), [`mask_loss`] adds the
+//!   alpha-against-mask term, [`knots`] steps the trajectories;
 //! - densification keeps the column aligned (children inherit their parent's object).
 //!
 //! [`node`] is the scene model's view of all this: the rigid objects as one node kind
@@ -117,7 +118,12 @@ pub struct RigidObjects {
     pub membership: Option<membership::Membership>,
     /// Joints between the parts of articulated objects, by column ID ([`parts::joints`]).
     pub joints: Vec<parts::Joint>,
+    /// Articulated objects' blended placement and its as-rigid-as-possible term.
+    pub skin: parts::skin::Skinning,
+    arap: parts::arap::Arap,
     rows: Vec<Vec<u32>>,
+    /// `rows` without the skinned ones (placed and chained back by `skin`).
+    rigid_rows: Vec<Vec<u32>>,
     poses: Vec<Pose>,
     grads: Vec<TrajectoryGrad>,
     mask: mask_loss::MaskLoss,
@@ -144,7 +150,10 @@ impl RigidObjects {
             started: false,
             id_maps,
             names,
+            skin: parts::skin::Skinning::default(),
+            arap: parts::arap::Arap::default(),
             rows: Vec::new(),
+            rigid_rows: Vec::new(),
             poses: Vec::new(),
             grads: Vec::new(),
             mask: mask_loss::MaskLoss::default(),
@@ -171,10 +180,32 @@ impl RigidObjects {
     }
 
     /// Places the object rows at time `t` (after `deform::apply`) and keeps the poses for
-    /// [`RigidObjects::backward`].
-    pub fn place(&mut self, model: &GaussianModel, column: &[u8], t: f32, out: &mut Deformed) {
+    /// [`RigidObjects::backward`]: each on its body, then the rows of articulated objects
+    /// by their skinning weights where the store has them (`aux`, [`parts::skin`]).
+    pub fn place(
+        &mut self,
+        model: &GaussianModel,
+        column: &[u8],
+        aux: &[crate::state::AuxRows],
+        t: f32,
+        out: &mut Deformed,
+    ) {
         place::rows_by_object(&self.objects, column, &mut self.rows);
         place::place(&self.objects, &self.rows, model, t, out, &mut self.poses);
+        let (objects, poses) = (&self.objects, &self.poses);
+        self.skin.place(objects, poses, model, column, aux, out);
+    }
+
+    /// The as-rigid-as-possible term of the articulated objects for this step's placement
+    /// ([`parts::arap`]); adds its gradient into `g_means` (world space).
+    pub fn add_arap(
+        &mut self,
+        model: &GaussianModel,
+        placed: &Deformed,
+        g_means: &mut [f32],
+    ) -> f32 {
+        let w = self.cfg.arap_weight;
+        self.arap.add(&self.skin, model, placed, w, g_means)
     }
 
     /// The alpha-against-mask term for training view `frame` (objects rendered alone, each
@@ -217,9 +248,19 @@ impl RigidObjects {
                 .iter()
                 .map(|o| TrajectoryGrad::zeros(o.trajectory.len())),
         );
+        self.rigid_rows.clone_from(&self.rows);
+        for &s in self
+            .skin
+            .groups
+            .iter()
+            .flatten()
+            .filter(|_| self.skin.active())
+        {
+            self.rigid_rows[s].clear();
+        }
         place::backward(
             &self.objects,
-            &self.rows,
+            &self.rigid_rows,
             model,
             &self.poses,
             place::WorldGrads {
@@ -229,7 +270,28 @@ impl RigidObjects {
             canon,
             &mut self.grads,
         );
+        if self.skin.active() {
+            let world = place::WorldGrads {
+                means: g_means,
+                quats: g_quats,
+            };
+            let (objects, poses) = (&self.objects, &self.poses);
+            self.skin
+                .backward(objects, poses, model, world, canon, &mut self.grads);
+        }
         parts::joints::add(&self.joints, &self.objects, &self.poses, &mut self.grads);
+    }
+
+    /// Adam on the skinning logits of this step's rows; `iteration` counts their steps
+    /// from `start_iter`. Whether every logit is finite.
+    pub fn step_skin(
+        &self,
+        iteration: u32,
+        hp: AdamHyper,
+        aux: &mut crate::state::AuxStore<'_>,
+    ) -> bool {
+        let t = iteration.saturating_sub(self.cfg.start_iter).max(1);
+        self.skin.step(aux, hp, self.cfg.skin_lr, t)
     }
 
     /// Adam on the knots that this step's view touched.

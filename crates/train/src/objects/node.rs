@@ -38,6 +38,10 @@ impl RigidObjects {
     fn start_now(&mut self, m: Milestone<'_>) -> Result<()> {
         let t0 = Instant::now();
         start::start(self, m.state, m.dataset, m.rng)?;
+        if self.cfg.skin {
+            let (k, radius) = (self.cfg.parts, self.cfg.skin_radius);
+            super::parts::skin::init(m.state, &self.objects, k, radius);
+        }
         let seconds = t0.elapsed().as_secs_f64();
         tracing::info!(iteration = m.iteration, seconds, "rigid objects started");
         Ok(())
@@ -52,6 +56,7 @@ impl RigidObjects {
             let rows = Rows {
                 model: &st.model,
                 column: &st.object,
+                aux: &st.aux,
             };
             let at = At {
                 time,
@@ -97,7 +102,7 @@ impl Node for RigidObjects {
 
     fn place(&mut self, rows: Rows<'_>, at: &At<'_>, out: &mut Deformed, tm: &mut StepTimings) {
         let t0 = Instant::now();
-        RigidObjects::place(self, rows.model, rows.column, at.time, out);
+        RigidObjects::place(self, rows.model, rows.column, rows.aux, at.time, out);
         tm.record(Phase::Deform, t0);
     }
 
@@ -119,8 +124,9 @@ impl Node for RigidObjects {
         let t0 = Instant::now();
         let cam = at.camera;
         let loss = self.add_mask_loss(at.frame, cam, at.model, at.deformed, grads)?;
+        let arap = self.add_arap(at.model, at.deformed, &mut grads.means);
         tm.record(Phase::Objects, t0);
-        Ok(loss)
+        Ok(loss + arap)
     }
 
     fn backward(
@@ -135,10 +141,11 @@ impl Node for RigidObjects {
         tm.record(Phase::Deform, t0);
     }
 
-    /// Adam on the knots; whether every knot is finite after it.
-    fn step(&mut self, _iteration: u32, hp: AdamHyper) -> bool {
+    /// Adam on the knots and the skinning logits; whether every value is finite after it.
+    fn step(&mut self, iteration: u32, hp: AdamHyper, aux: &mut AuxStore<'_>) -> bool {
         RigidObjects::step(self, hp);
-        self.nonfinite_knot().is_none()
+        let logits_ok = self.step_skin(iteration, hp, aux);
+        logits_ok && self.nonfinite_knot().is_none()
     }
 
     fn before_refine(&self, state: &mut GaussianState, step: &Refining<'_>) {
@@ -147,7 +154,9 @@ impl Node for RigidObjects {
             placed: step.placed,
             time: step.time,
         };
+        let before = state.object.clone();
         let moved = self.transfer(state, &at);
+        super::parts::skin::rehome(state, &self.objects, &before);
         tracing::debug!(
             iteration = step.iteration,
             moved,

@@ -18,18 +18,21 @@
 //!    `parts_min_gain` against the rigid fit; otherwise the rigid fit stands unchanged, so
 //!    an object that moves as one comes out exactly as the rigid mode makes it.
 //!
-//! In training the parts are ordinary rigid bodies (placement, knots, checkpoints), their
-//! mask term renders them together (`mask_loss.rs`), and the joint term keeps adding its
-//! gradient to their knots (`RigidObjects::backward`). The evidence of every split is kept
-//! in the start report ([`PartsEvidence`]).
-//!
-//! SC-GS binds Gaussians to a few hundred control points by learned skinning weights and an
-//! as-rigid-as-possible term; this is the piecewise-rigid special case (each Gaussian on
-//! one part), which an articulated machine is and which the ID maps let us find per object.
+//! In training the parts are bodies of the rigid node (knots, checkpoints), their mask
+//! term renders them together (`mask_loss.rs`), and the joint term keeps adding its
+//! gradient to their knots (`RigidObjects::backward`). With `objects.skin` (the default)
+//! each Gaussian of the object is placed by a blend of all its parts' poses with learned
+//! weights ([`skin`], linear blend skinning as SC-GS binds Gaussians to its control
+//! points), starting from its distance to each part; [`arap`] (off unless
+//! `arap_weight > 0`) keeps neighbouring Gaussians of a part rigid where the weights
+//! blend; `skin = false` keeps each Gaussian on one part (piecewise rigid). The evidence of every split is kept in the start report
+//! ([`PartsEvidence`]).
 
+pub mod arap;
 pub mod cluster;
 pub mod joints;
 pub mod merge;
+pub mod skin;
 pub mod track;
 
 use super::json_f32;

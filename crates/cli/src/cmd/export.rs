@@ -38,8 +38,11 @@ pub struct Args {
     /// order), `times` one row per --times value (absent without it). A pose maps
     /// x_world = R(q)·x_object + translation; `object_to_world` is the same pose as a
     /// row-major 4×4 matrix, x_world = M·[x_object, 1] (the convention of toycars'
-    /// objects.json). Also writes `DIR/background.ply`: the Gaussians of no object, undeformed
-    /// (canonical space; `--only background --time T` gives them deformed to time T).
+    /// objects.json). A part of an articulated object trained with skinning adds
+    /// `"skinning": {"parts": [name, …], "weights": [[w, …] per Gaussian]}`: Gaussian i is
+    /// placed at Σ_k weights[i][k]·pose_{parts[k]}(t)·x_i. Also writes `DIR/background.ply`:
+    /// the Gaussians of no object, undeformed (canonical space; `--only background --time T`
+    /// gives them deformed to time T).
     #[arg(long, conflicts_with_all = ["time", "only", "without"])]
     pub per_object: bool,
 }

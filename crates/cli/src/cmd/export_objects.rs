@@ -7,7 +7,9 @@
 use super::render::LoadedRun;
 use anyhow::{bail, Context, Result};
 use std::path::Path;
-use train::objects::export::{background_model, object_model, scene_frames, trajectory_file};
+use train::objects::export::{
+    background_model, object_model, scene_frames, trajectory_file, SkinningWeights,
+};
 use train::objects::select::{file_safe, BACKGROUND};
 use train::objects::RigidObject;
 
@@ -25,10 +27,16 @@ pub fn write(r: &LoadedRun, run: &Path, out: &Path, times: &[f32]) -> Result<()>
         let ply = out.join(format!("{stem}.ply"));
         train::ply::write(&ply, &model).with_context(|| format!("writing {}", ply.display()))?;
         let json = out.join(format!("{stem}.trajectory.json"));
-        let file = trajectory_file(o, model.len(), &frames, times);
+        let mut file = trajectory_file(o, model.len(), &frames, times);
+        let skin = train::objects::parts::skin::weights_of(&r.objects, &r.column, &r.aux, o.id);
+        file.skinning = skin.map(|(parts, weights)| SkinningWeights { parts, weights });
         scene::io::write_json(&json, &file)
             .with_context(|| format!("writing {}", json.display()))?;
-        let kind = if o.is_static { "static" } else { "moving" };
+        let kind = match (&file.skinning, o.is_static) {
+            (Some(s), _) => format!("skinned over {} parts", s.parts.len()),
+            (None, true) => "static".into(),
+            (None, false) => "moving".into(),
+        };
         println!(
             "{} (ID {}, {kind}): {} Gaussians → {}, {} poses → {}",
             o.name,

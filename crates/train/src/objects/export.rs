@@ -57,6 +57,22 @@ pub struct TrajectoryFile {
     /// One pose per time asked for (empty unless `--times` was given).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub times: Vec<PoseAt>,
+    /// For a part of an articulated object trained with skinning: how each of its
+    /// Gaussians blends the parts' poses (absent otherwise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub skinning: Option<SkinningWeights>,
+}
+
+/// A skinned part's weights: Gaussian i of `<name>.ply` is placed at
+/// `x_world(t) = Σ_k weights[i][k] · pose_{parts[k]}(t) · x_i`, each part's pose from its
+/// own trajectory file (its rotation by the normalized blend of the parts' quaternions).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SkinningWeights {
+    /// The object's parts (their names, as their trajectory files give them), in the order
+    /// of each row's weights.
+    pub parts: Vec<String>,
+    /// One row per Gaussian of the PLY, in its order; each row sums to 1.
+    pub weights: Vec<Vec<f32>>,
 }
 
 /// A frame of the scene as the trajectory file names it.
@@ -123,6 +139,7 @@ pub fn trajectory_file(
             .map(|f| PoseAt::of(o, f.time, Some(f)))
             .collect(),
         times: times.iter().map(|&t| PoseAt::of(o, t, None)).collect(),
+        skinning: None,
     }
 }
 
@@ -155,6 +172,10 @@ mod tests {
         let json = serde_json::to_value(&f).unwrap();
         assert_eq!(json["static"], false);
         assert_eq!(json["knot_times"].as_array().unwrap().len(), 2);
+        assert!(
+            json.get("skinning").is_none(),
+            "a rigid object's file has no weights"
+        );
 
         let m = crate::init::from_points(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0], &[0.5; 6], 0.1);
         let rows = object_model(&o, &m, &[NO_OBJECT, 3]);

@@ -337,6 +337,32 @@ pub fn rehome(state: &mut GaussianState, objects: &[RigidObject], before: &[u8])
     }
 }
 
+/// The skinning weights of body `id`'s Gaussians (its rows of `column`, in row order), with
+/// the names of the bodies they weigh (its object's parts, in logit order): what
+/// `export --per-object` writes beside a skinned part. None for a body that is not skinned.
+pub fn weights_of(
+    objects: &[RigidObject],
+    column: &[u8],
+    aux: &[AuxRows],
+    id: u8,
+) -> Option<(Vec<String>, Vec<Vec<f32>>)> {
+    let a = rows_of(aux)?;
+    let groups = groups(objects);
+    let slots = groups
+        .iter()
+        .find(|g| g.iter().any(|&s| objects[s].id == id))?;
+    let names = slots.iter().map(|&s| objects[s].name.clone()).collect();
+    let weights = (0..column.len())
+        .filter(|&i| column[i] == id)
+        .map(|i| {
+            let mut w = vec![0.0; slots.len()];
+            softmax(&a.data[i * a.cols..i * a.cols + slots.len()], &mut w);
+            w
+        })
+        .collect();
+    Some((names, weights))
+}
+
 fn softmax(z: &[f32], w: &mut [f32]) {
     let m = z.iter().copied().fold(f32::NEG_INFINITY, f32::max);
     let mut sum = 0.0;
@@ -584,6 +610,20 @@ mod tests {
         assert_eq!(st.object[4], 9, "column follows the largest weight");
         assert_eq!(st.object[0], 4);
         assert_eq!(&st.aux[0].data[10 * 12..10 * 12 + 2], &[-HARD, 0.0]);
+    }
+
+    /// The exported weights are the softmax of a body's rows' logits, in row order, named
+    /// by the object's parts; a body outside any articulated object has none.
+    #[test]
+    fn exported_weights_follow_the_rows() {
+        let (o, x) = (objects(), skin_rows(3));
+        let (names, w) = weights_of(&o, &COLUMN, std::slice::from_ref(&x), 4).unwrap();
+        assert_eq!(names, ["crane", "crane/part-1"]);
+        assert_eq!(w.len(), 2, "rows 0 and 2 are the body's");
+        let e = (-0.7f32 - 0.4).exp();
+        assert!((w[0][0] - 1.0 / (1.0 + e)).abs() < 1e-6 && (w[0][0] + w[0][1] - 1.0).abs() < 1e-6);
+        let lone = RigidObject::new(7, "box".into(), o[0].trajectory.clone(), true);
+        assert!(weights_of(&[lone], &[7], std::slice::from_ref(&x), 7).is_none());
     }
 
     /// A logit Adam step moves against the gradient and keeps the moments in the rows.

@@ -72,6 +72,8 @@ def main():
     t0 = times[0]
     bodies = sorted(f[:-4] for f in os.listdir(export)
                     if f.endswith(".ply") and (f == f"{name}.ply" or f.startswith(f"{name}-part-")))
+    if not bodies:
+        sys.exit(f"{export}: no {name}.ply or {name}-part-N.ply (run `semdynreg export RUN --per-object --out {export}`)")
     print(f"{'body':<16} {'Gaussians':>9}  " + "  ".join(f"{'vs ' + t:>22}" for t in ["still"] + parts))
     for body in bodies:
         means = read_ply_means(os.path.join(export, body + ".ply"))[::5]

@@ -3,7 +3,8 @@
 //! optimizer reports for free whether every value it wrote is finite
 //! ([`crate::adam::Adam::step_rows`]); the scans here then find where (they run only when
 //! something is already wrong, and before each checkpoint is written). Each node scans its
-//! own parameters ([`crate::node::Node::nonfinite`]); [`locate_store`] scans the Gaussians.
+//! own parameters ([`crate::node::Node::nonfinite`]); [`locate_store`] scans the Gaussians
+//! and the per-Gaussian rows beside them.
 
 use crate::model::ROWS;
 use crate::state::GaussianState;
@@ -44,7 +45,15 @@ pub fn locate_store(st: &GaussianState) -> Option<String> {
             }
         }
     }
-    None
+    st.aux.iter().find_map(|a| {
+        first_nonfinite(&a.data).map(|i| {
+            format!(
+                "per-Gaussian rows `{}` (Gaussian {} of {n})",
+                a.name,
+                i / a.cols.max(1)
+            )
+        })
+    })
 }
 
 #[cfg(test)]
@@ -60,5 +69,20 @@ mod tests {
         v[3] = f32::NAN;
         assert_eq!(first_nonfinite(&v), Some(3));
         assert_eq!(first_nonfinite(&[]), None);
+    }
+
+    /// Rows that nodes keep beside the parameters (skinning logits, votes) are scanned too.
+    #[test]
+    fn the_store_scan_names_per_gaussian_rows() {
+        let m = crate::init::from_points(&[0.0; 6], &[0.5; 6], 0.5);
+        let mut st = GaussianState::new(m);
+        assert_eq!(locate_store(&st), None);
+        st.aux.push(crate::state::AuxRows {
+            name: "objects.skin".into(),
+            cols: 3,
+            data: vec![0.0, 0.0, 0.0, 0.0, f32::NAN, 0.0],
+        });
+        let got = locate_store(&st).expect("found");
+        assert!(got.contains("`objects.skin` (Gaussian 1 of 2)"), "{got}");
     }
 }

@@ -331,40 +331,57 @@ fn point_cloud_colours_initialize_sh_dc() {
     );
 }
 
-/// Rigid objects (`objects`): a run stopped after the objects' start (during densification,
-/// with votes transferring Gaussians) and resumed ends bit-identical to an uninterrupted
-/// one: object column, trajectories and their moments included.
-#[test]
-fn rigid_objects_survive_densify_and_resume() {
+/// An 80-iteration run whose objects start at iteration 20 with a small, quick track,
+/// after `tweak` changes the objects' settings.
+fn objects_config(tweak: impl FnOnce(&mut ObjectsConfig)) -> train::TrainConfig {
     let mut cfg = common::small_config(80);
     cfg.objects.enabled = true;
     cfg.objects.start_iter = 20;
     (cfg.objects.lift_points, cfg.objects.lift_thickness) = (300, vec![0.25]);
     (cfg.objects.track_pose_iters, cfg.objects.track_shape_iters) = (5, 2);
     cfg.objects.track_refine_iters = 20;
+    tweak(&mut cfg.objects);
     cfg.validate().unwrap();
-    let ds = scene_with_id_maps();
-    let mut a = Trainer::new(cfg.clone(), ds.clone(), 7).unwrap();
-    for _ in 0..80 {
-        a.step().unwrap();
+    cfg
+}
+
+/// `iters` iterations of `cfg` on `ds` from seed 7.
+fn trained(cfg: &train::TrainConfig, ds: &scene::Dataset, iters: u32) -> Trainer {
+    let mut t = Trainer::new(cfg.clone(), ds.clone(), 7).unwrap();
+    for _ in 0..iters {
+        t.step().unwrap();
     }
+    t
+}
+
+/// 40 iterations, a checkpoint, then 40 more from the loaded checkpoint.
+fn stopped_and_resumed(cfg: &train::TrainConfig, ds: &scene::Dataset) -> Trainer {
+    let b = trained(cfg, ds, 40);
+    let run = tempfile::tempdir().unwrap();
+    let dir = checkpoint::save(&b, run.path()).unwrap();
+    drop(b);
+    let mut c = checkpoint::load_trainer(&dir, ds.clone()).unwrap();
+    for _ in 0..40 {
+        c.step().unwrap();
+    }
+    c
+}
+
+/// Rigid objects (`objects`): a run stopped after the objects' start (during densification,
+/// with votes transferring Gaussians) and resumed ends bit-identical to an uninterrupted
+/// one: object column, trajectories and their moments included.
+#[test]
+fn rigid_objects_survive_densify_and_resume() {
+    let cfg = objects_config(|_| {});
+    let ds = scene_with_id_maps();
+    let a = trained(&cfg, &ds, 80);
     let node = a.nodes.get::<RigidObjects>().expect("objects started");
     assert_eq!(node.objects.len(), 3, "one rigid body per vehicle");
     let owned = |t: &Trainer| t.state.object.iter().filter(|&&o| o != 255).count();
     assert!(owned(&a) > 0, "object Gaussians survive densification");
     assert!(a.state.is_aligned());
 
-    let mut b = Trainer::new(cfg, ds.clone(), 7).unwrap();
-    for _ in 0..40 {
-        b.step().unwrap();
-    }
-    let run = tempfile::tempdir().unwrap();
-    let dir = checkpoint::save(&b, run.path()).unwrap();
-    drop(b);
-    let mut c = checkpoint::load_trainer(&dir, ds).unwrap();
-    for _ in 0..40 {
-        c.step().unwrap();
-    }
+    let c = stopped_and_resumed(&cfg, &ds);
     assert_bit_equal(&a, &c);
     assert_eq!(a.state.object, c.state.object, "object column");
     let poses = |t: &Trainer| -> Vec<u32> {
@@ -397,21 +414,9 @@ fn rigid_objects_survive_densify_and_resume() {
     }
 }
 
-/// The start reports of a short run whose objects start at iteration 20 with a small,
-/// quick track, after `tweak` changes the objects' settings.
+/// The start reports of a short run of [`objects_config`] with `tweak` (25 iterations).
 fn start_reports(tweak: impl FnOnce(&mut ObjectsConfig)) -> Vec<StartReport> {
-    let mut cfg = common::small_config(80);
-    cfg.objects.enabled = true;
-    cfg.objects.start_iter = 20;
-    (cfg.objects.lift_points, cfg.objects.lift_thickness) = (300, vec![0.25]);
-    (cfg.objects.track_pose_iters, cfg.objects.track_shape_iters) = (5, 2);
-    cfg.objects.track_refine_iters = 20;
-    tweak(&mut cfg.objects);
-    cfg.validate().unwrap();
-    let mut t = Trainer::new(cfg, scene_with_id_maps(), 7).unwrap();
-    for _ in 0..25 {
-        t.step().unwrap();
-    }
+    let t = trained(&objects_config(tweak), &scene_with_id_maps(), 25);
     t.nodes
         .get::<RigidObjects>()
         .expect("objects started")
@@ -497,23 +502,12 @@ fn holding_still_must_not_cost_the_masks_overlap() {
 /// stay on their objects' parts, and the checkpoint renders what the trainer renders.
 #[test]
 fn skinned_parts_survive_densify_resume_and_render_from_a_checkpoint() {
-    let mut cfg = common::small_config(80);
-    cfg.objects.enabled = true;
-    cfg.objects.start_iter = 20;
-    (cfg.objects.lift_points, cfg.objects.lift_thickness) = (300, vec![0.25]);
-    (cfg.objects.track_pose_iters, cfg.objects.track_shape_iters) = (5, 2);
-    cfg.objects.track_refine_iters = 20;
-    (
-        cfg.objects.parts,
-        cfg.objects.parts_merge,
-        cfg.objects.parts_min_gain,
-    ) = (2, 0.0, 0.0);
-    cfg.validate().unwrap();
+    let cfg = objects_config(|o| {
+        (o.parts, o.parts_merge, o.parts_min_gain) = (2, 0.0, 0.0);
+        o.arap_weight = 0.1;
+    });
     let ds = scene_with_id_maps();
-    let mut a = Trainer::new(cfg.clone(), ds.clone(), 7).unwrap();
-    for _ in 0..80 {
-        a.step().unwrap();
-    }
+    let a = trained(&cfg, &ds, 80);
     let node = a.nodes.get::<RigidObjects>().expect("objects started");
     let groups = train::objects::parts::skin::groups(&node.objects);
     assert!(
@@ -527,20 +521,11 @@ fn skinned_parts_survive_densify_resume_and_render_from_a_checkpoint() {
     assert!(a.state.object.iter().all(|c| *c == 255 || ids.contains(c)));
     assert!(a.state.is_aligned());
 
-    let mut b = Trainer::new(cfg, ds.clone(), 7).unwrap();
-    for _ in 0..40 {
-        b.step().unwrap();
-    }
-    let run = tempfile::tempdir().unwrap();
-    let dir = checkpoint::save(&b, run.path()).unwrap();
-    drop(b);
-    let mut c = checkpoint::load_trainer(&dir, ds.clone()).unwrap();
-    for _ in 0..40 {
-        c.step().unwrap();
-    }
+    let mut c = stopped_and_resumed(&cfg, &ds);
     assert_bit_equal(&a, &c);
     assert_eq!(a.state.object, c.state.object, "object column");
 
+    let run = tempfile::tempdir().unwrap();
     let dir = checkpoint::save(&c, run.path()).unwrap();
     let mut loaded = checkpoint::load_model(&dir).unwrap();
     let f = &ds.test[0];

@@ -248,19 +248,19 @@ impl RigidObjects {
                 .iter()
                 .map(|o| TrajectoryGrad::zeros(o.trajectory.len())),
         );
-        self.rigid_rows.clone_from(&self.rows);
-        for &s in self
-            .skin
-            .groups
-            .iter()
-            .flatten()
-            .filter(|_| self.skin.active())
-        {
-            self.rigid_rows[s].clear();
-        }
+        // The skinned rows are chained back by `skin` below, not by their home body.
+        let rows = if self.skin.active() {
+            self.rigid_rows.clone_from(&self.rows);
+            for &s in self.skin.groups.iter().flatten() {
+                self.rigid_rows[s].clear();
+            }
+            &self.rigid_rows
+        } else {
+            &self.rows
+        };
         place::backward(
             &self.objects,
-            &self.rigid_rows,
+            rows,
             model,
             &self.poses,
             place::WorldGrads {

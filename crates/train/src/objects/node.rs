@@ -154,9 +154,12 @@ impl Node for RigidObjects {
             placed: step.placed,
             time: step.time,
         };
-        let before = state.object.clone();
+        let skinned = super::parts::skin::rows_of(&state.aux).is_some();
+        let before = skinned.then(|| state.object.clone());
         let moved = self.transfer(state, &at);
-        super::parts::skin::rehome(state, &self.objects, &before);
+        if let Some(before) = before {
+            super::parts::skin::rehome(state, &self.objects, &before);
+        }
         tracing::debug!(
             iteration = step.iteration,
             moved,

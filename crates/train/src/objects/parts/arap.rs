@@ -148,14 +148,7 @@ mod tests {
                 _ => NO_OBJECT,
             })
             .collect();
-        let model = GaussianModel {
-            means,
-            quats: [1.0, 0.0, 0.0, 0.0].repeat(n),
-            log_scales: vec![-2.0; 3 * n],
-            opacity_logits: vec![0.0; n],
-            sh: vec![0.0; 48 * n],
-            sh_degree: 0,
-        };
+        let model = crate::init::from_points(&means, &vec![0.5; 3 * n], 0.5);
         let still = Trajectory {
             times: vec![0.0, 1.0],
             translations: vec![[0.0; 3]; 2],

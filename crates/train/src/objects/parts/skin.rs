@@ -575,15 +575,8 @@ mod tests {
         }
         means.extend([5.0, 5.0, 5.0]);
         column.push(NO_OBJECT);
-        let n = column.len();
-        let mut st = GaussianState::new(GaussianModel {
-            means,
-            quats: [1.0, 0.0, 0.0, 0.0].repeat(n),
-            log_scales: vec![-2.0; 3 * n],
-            opacity_logits: vec![0.0; n],
-            sh: vec![0.0; 48 * n],
-            sh_degree: 0,
-        });
+        let colours = vec![0.5; means.len()];
+        let mut st = GaussianState::new(crate::init::from_points(&means, &colours, 0.5));
         st.object = column;
         let o = objects();
         init(&mut st, &o, 4, 1.0);

@@ -118,6 +118,22 @@ pub fn mask_path(root: &Path, file_path: &str) -> PathBuf {
     root.join("masks").join(format!("{file_path}.png"))
 }
 
+/// The image file of a frame whose `file_path` names it relative to the scene root with its
+/// extension implied (D-NeRF, Blender, toycars): the first of `.png`, `.jpg`, `.jpeg` (or
+/// the path itself) that exists. `None` for layouts that keep images elsewhere (Nerfies'
+/// `rgb/<scale>x/`, COLMAP's `images/`).
+pub fn image_file(root: &Path, file_path: &str) -> Option<PathBuf> {
+    let as_is = root.join(file_path);
+    std::iter::once(as_is.clone())
+        .filter(|p| p.extension().is_some())
+        .chain(
+            ["png", "PNG", "jpg", "jpeg"]
+                .iter()
+                .map(|e| root.join(format!("{file_path}.{e}"))),
+        )
+        .find(|p| p.is_file())
+}
+
 /// Ground-truth part map of a scene with articulated objects (toycars' crane):
 /// `ROOT/parts/<file_path>.png`, per pixel of an articulated object the part it shows (0 the
 /// body, `k + 1` its part `k` in `objects.json`), 255 elsewhere.

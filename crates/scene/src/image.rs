@@ -197,6 +197,39 @@ pub fn load_mask(path: &Path) -> Result<MaskU8, SceneError> {
     }
 }
 
+/// A one-object ID map from an RGBA image's alpha channel: 0 where the pixel is at least
+/// half opaque, [`MASK_BACKGROUND`] elsewhere. Synthetic scenes rendered over a transparent
+/// background (D-NeRF, Blender) carry the object's silhouette this way; `segment --masks
+/// alpha` uses it. An image without alpha is refused: it has no silhouette to read.
+pub fn load_alpha_ids(path: &Path) -> Result<MaskU8, SceneError> {
+    let img = image::ImageReader::open(path)
+        .map_err(|e| SceneError::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| SceneError::io(path, e))?
+        .decode()
+        .map_err(|e| SceneError::image(path, e))?;
+    if !img.color().has_alpha() {
+        return Err(SceneError::invalid(
+            path,
+            format!(
+                "has no alpha channel ({:?}): alpha masks need RGBA frames",
+                img.color()
+            ),
+        ));
+    }
+    let rgba = img.into_rgba8();
+    let (width, height) = rgba.dimensions();
+    let data = rgba
+        .pixels()
+        .map(|p| if p[3] >= 128 { 0 } else { MASK_BACKGROUND })
+        .collect();
+    Ok(MaskU8 {
+        width,
+        height,
+        data,
+    })
+}
+
 /// Writes `mask` as an 8-bit grayscale PNG, atomically.
 pub fn save_mask(path: &Path, mask: &MaskU8) -> Result<(), SceneError> {
     let buf: ImageBuffer<Luma<u8>, &[u8]> =
@@ -208,6 +241,29 @@ pub fn save_mask(path: &Path, mask: &MaskU8) -> Result<(), SceneError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn alpha_ids_mark_the_opaque_half_and_refuse_rgb() {
+        let dir = std::env::temp_dir().join(format!("alpha_ids_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let rgba = dir.join("a.png");
+        let px = [9, 9, 9, 0, 9, 9, 9, 127, 9, 9, 9, 128, 9, 9, 9, 255];
+        save_rgba_png(&rgba, 4, 1, &px).unwrap();
+        let ids = load_alpha_ids(&rgba).unwrap();
+        assert_eq!((ids.width, ids.height), (4, 1));
+        assert_eq!(ids.data, [MASK_BACKGROUND, MASK_BACKGROUND, 0, 0]);
+        let rgb = dir.join("b.png");
+        ImageU8 {
+            width: 1,
+            height: 1,
+            data: vec![1, 2, 3],
+        }
+        .save_png(&rgb)
+        .unwrap();
+        let err = load_alpha_ids(&rgb).unwrap_err().to_string();
+        assert!(err.contains("b.png") && err.contains("no alpha"), "{err}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     #[test]
     fn composite_blends_over_background() {

@@ -27,10 +27,12 @@ pub mod objects;
 mod ply;
 pub mod toycars;
 
-pub use crate::image::{load_mask, save_mask, save_rgba_png, ImageU8, MaskU8, MASK_BACKGROUND};
+pub use crate::image::{
+    load_alpha_ids, load_mask, save_mask, save_rgba_png, ImageU8, MaskU8, MASK_BACKGROUND,
+};
 pub use dataset::{
-    detect_kind, load_dataset, mask_path, part_map_path, semantics_path, Dataset, DatasetKind,
-    Frame, LoadOptions, LAYOUTS,
+    detect_kind, image_file, load_dataset, mask_path, part_map_path, semantics_path, Dataset,
+    DatasetKind, Frame, LoadOptions, LAYOUTS,
 };
 pub use error::SceneError;
 pub use ply::read_points as read_ply_points;

@@ -33,6 +33,8 @@ pub enum LabelSource {
 pub enum MaskSource {
     Sam,
     Gt,
+    /// The frames' alpha channel as one object (id 0): RGBA scenes such as D-NeRF's.
+    Alpha,
 }
 
 /// Everything that determines the output; serialized into `semantics.json` and compared to
@@ -282,7 +284,7 @@ struct Models {
 }
 
 fn load_models(opts: &SegmentOptions) -> Result<Models, SegmentError> {
-    if opts.masks == MaskSource::Gt {
+    if opts.masks != MaskSource::Sam {
         return Ok(Models {
             sam: None,
             clip: None,
@@ -310,11 +312,17 @@ fn load_models(opts: &SegmentOptions) -> Result<Models, SegmentError> {
 fn frame_ids(
     root: &Path,
     frame: &scene::Frame,
+    masks: MaskSource,
     models: &Models,
     gen: &MaskGenConfig,
 ) -> Result<(Vec<u8>, usize), SegmentError> {
     let img = &frame.image;
     let (w, h) = (img.width as usize, img.height as usize);
+    if masks == MaskSource::Alpha {
+        let ids = alpha_ids(root, frame)?;
+        let n = usize::from(ids.contains(&0));
+        return Ok((ids, n));
+    }
     let gt = || -> Result<Vec<u8>, SegmentError> {
         let p = scene::mask_path(root, &frame.file_path);
         if !p.is_file() {
@@ -349,6 +357,30 @@ fn frame_ids(
         None => labels_from_gt(&am, &gt()?),
     };
     Ok((paint_labels(&am, &labels), am.masks.len()))
+}
+
+/// `--masks alpha`: the frame's own image file read again for its alpha channel (the
+/// loaded frame is already composited over the background).
+fn alpha_ids(root: &Path, frame: &scene::Frame) -> Result<Vec<u8>, SegmentError> {
+    let path = scene::image_file(root, &frame.file_path).ok_or_else(|| {
+        SegmentError::Input(format!(
+            "{}: no image file for frame {} (--masks alpha reads D-NeRF/Blender layouts, \
+             whose file_path names the image)",
+            root.display(),
+            frame.file_path
+        ))
+    })?;
+    let ids = scene::load_alpha_ids(&path)?;
+    if (ids.width, ids.height) != (frame.image.width, frame.image.height) {
+        return Err(SegmentError::Io {
+            path,
+            msg: format!(
+                "is {}×{}, the loaded frame {}×{}",
+                ids.width, ids.height, frame.image.width, frame.image.height
+            ),
+        });
+    }
+    Ok(ids.data)
 }
 
 /// Segment every training frame of the scene at `root`; `progress(done, total)` is called
@@ -390,7 +422,7 @@ pub fn segment_scene(
     let mut frames = Vec::with_capacity(ds.train.len());
     for (i, frame) in ds.train.iter().enumerate() {
         let t0 = Instant::now();
-        let (ids, n_masks) = frame_ids(root, frame, &models, gen)?;
+        let (ids, n_masks) = frame_ids(root, frame, opts.masks, &models, gen)?;
         let mask = scene::MaskU8 {
             width: frame.image.width,
             height: frame.image.height,

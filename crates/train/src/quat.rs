@@ -112,6 +112,48 @@ pub fn to_rotvec(q: [f32; 4]) -> [f32; 3] {
     [q[1] / s * angle, q[2] / s * angle, q[3] / s * angle]
 }
 
+/// Unit quaternion (w ≥ 0) of a row-major rotation matrix, by the largest of the four
+/// diagonal combinations (Shepperd 1978), which keeps the division well away from zero.
+pub fn from_matrix(r: &[[f64; 3]; 3]) -> [f32; 4] {
+    let tr = r[0][0] + r[1][1] + r[2][2];
+    let q = if tr > r[0][0].max(r[1][1]).max(r[2][2]) {
+        let s = 2.0 * (1.0 + tr).sqrt();
+        [
+            0.25 * s,
+            (r[2][1] - r[1][2]) / s,
+            (r[0][2] - r[2][0]) / s,
+            (r[1][0] - r[0][1]) / s,
+        ]
+    } else if r[0][0] >= r[1][1] && r[0][0] >= r[2][2] {
+        let s = 2.0 * (1.0 + r[0][0] - r[1][1] - r[2][2]).sqrt();
+        [
+            (r[2][1] - r[1][2]) / s,
+            0.25 * s,
+            (r[0][1] + r[1][0]) / s,
+            (r[0][2] + r[2][0]) / s,
+        ]
+    } else if r[1][1] >= r[2][2] {
+        let s = 2.0 * (1.0 + r[1][1] - r[0][0] - r[2][2]).sqrt();
+        [
+            (r[0][2] - r[2][0]) / s,
+            (r[0][1] + r[1][0]) / s,
+            0.25 * s,
+            (r[1][2] + r[2][1]) / s,
+        ]
+    } else {
+        let s = 2.0 * (1.0 + r[2][2] - r[0][0] - r[1][1]).sqrt();
+        [
+            (r[1][0] - r[0][1]) / s,
+            (r[0][2] + r[2][0]) / s,
+            (r[1][2] + r[2][1]) / s,
+            0.25 * s,
+        ]
+    };
+    let sign = if q[0] < 0.0 { -1.0 } else { 1.0 };
+    let q = q.map(|v| (sign * v) as f32);
+    normalize(&q).0
+}
+
 /// Angle in radians of the rotation between two unit quaternions.
 pub fn angle_between(a: [f32; 4], b: [f32; 4]) -> f32 {
     let d = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]).abs();
@@ -121,6 +163,27 @@ pub fn angle_between(a: [f32; 4], b: [f32; 4]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn matrix_round_trips_through_the_quaternion() {
+        // Near the identity, half-turns about each axis (each branch of Shepperd's rule).
+        let cases = [
+            [0.9, 0.1, -0.3, 0.2],
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.05, 0.1, 0.2, 0.97],
+        ];
+        for q in cases {
+            let q = normalize(&q).0;
+            let m = to_matrix(q).map(|row| row.map(f64::from));
+            let back = from_matrix(&m);
+            let d = (0..4).map(|k| (back[k] - q[k]).abs()).fold(0.0, f32::max);
+            let d_neg = (0..4).map(|k| (back[k] + q[k]).abs()).fold(0.0, f32::max);
+            assert!(d.min(d_neg) < 1e-5, "{q:?} → {back:?}");
+            assert!(back[0] >= 0.0);
+        }
+    }
 
     #[test]
     fn product_composes_rotations() {

@@ -414,6 +414,66 @@ fn rigid_objects_survive_densify_and_resume() {
     }
 }
 
+/// Objects taken over from the deformation field (`source = "field"`): nothing is masked
+/// out of the field's gradient before the take-over, which then gives every object's
+/// member rows to its bodies without changing how many rows there are, logs both fits in
+/// the start report, and a run stopped after it resumes bit-identically.
+#[test]
+fn objects_taken_over_from_the_field_survive_densify_and_resume() {
+    let cfg = objects_config(|o| {
+        o.source = train::objects::ObjectSource::Field;
+        o.field_start_iter = 30;
+        o.parts = 2;
+    });
+    let ds = scene_with_id_maps();
+    let before = trained(&cfg, &ds, 29);
+    assert!(
+        before.state.object.iter().all(|&o| o == 255),
+        "no object before the take-over"
+    );
+    let rows_before = before.state.len();
+    drop(before);
+    let a = trained(&cfg, &ds, 30);
+    assert_eq!(a.state.len(), rows_before, "the take-over adds no rows");
+    let node = a.nodes.get::<RigidObjects>().expect("objects started");
+    assert!(node.started);
+    let reports = &node.start_reports;
+    assert_eq!(reports.len(), 3, "one report per vehicle: {reports:?}");
+    assert!(
+        reports.iter().filter(|r| !r.left_to_field).count() >= 2,
+        "{reports:?}"
+    );
+    for r in reports {
+        let Some(p) = r.parts else {
+            assert!(
+                r.left_to_field && r.gaussians == 0,
+                "no fit, no take-over: {r:?}"
+            );
+            continue;
+        };
+        assert!(
+            p.loss_rigid.is_finite() && p.loss_parts.is_finite(),
+            "{r:?}"
+        );
+        assert!(p.loss_parts <= p.loss_rigid + 1e-6, "{r:?}");
+        let owned = a
+            .state
+            .object
+            .iter()
+            .filter(|&&o| node.objects.iter().any(|b| b.id == o && b.mask == r.id))
+            .count();
+        assert_eq!(owned == 0, r.left_to_field, "{r:?}: {owned} rows");
+    }
+    assert!(a.state.is_aligned());
+    let a = trained(&cfg, &ds, 80);
+    let c = stopped_and_resumed(&cfg, &ds);
+    assert_bit_equal(&a, &c);
+    assert_eq!(a.state.object, c.state.object, "object column");
+    let reports =
+        |t: &Trainer| format!("{:?}", t.nodes.get::<RigidObjects>().unwrap().start_reports);
+    assert_eq!(reports(&a), reports(&c), "start reports");
+}
+
 /// The start reports of a short run of [`objects_config`] with `tweak` (25 iterations).
 fn start_reports(tweak: impl FnOnce(&mut ObjectsConfig)) -> Vec<StartReport> {
     let t = trained(&objects_config(tweak), &scene_with_id_maps(), 25);

@@ -26,6 +26,7 @@ pub enum Labels {
 pub enum Masks {
     Sam,
     Gt,
+    Alpha,
 }
 
 /// Object-ID maps of a scene's frames for `train --reg` / `--objects`: SAM masks labelled per
@@ -34,13 +35,15 @@ pub enum Masks {
 #[command(after_help = "Examples:\n  \
     semdynreg segment SCENE --track --prompt 'white SUV@120,80' --prompt 'green SUV@300,200'\n  \
     semdynreg segment SCENE --track --box 'car@40,60,140,130@train/r_010'\n  \
-    semdynreg segment SCENE --track            # objects found automatically on the first frame")]
+    semdynreg segment SCENE --track            # objects found automatically on the first frame\n  \
+    semdynreg segment lego --masks alpha --dict lego   # D-NeRF: the RGBA silhouette is the object")]
 pub struct Args {
     /// Scene folder (D-NeRF layout; ground-truth masks in SCENE/masks for `gt` modes).
     pub scene: PathBuf,
-    /// Comma-separated dictionary; object i ↔ prompt i.
-    #[arg(long, default_value = "white SUV,yellow sedan,green SUV")]
-    pub dict: String,
+    /// Comma-separated dictionary; object i ↔ prompt i [default: "white SUV,yellow sedan,green
+    /// SUV"; with --masks alpha: "object", the name of the one object].
+    #[arg(long)]
+    pub dict: Option<String>,
     /// SAM checkpoint (mobile_sam.pt, sam_vit_*.pth or .safetensors); default
     /// $SEMDYNREG_WEIGHTS/mobile_sam.pt, else ./weights/mobile_sam.pt.
     #[arg(long)]
@@ -52,8 +55,10 @@ pub struct Args {
     /// --clip), `gt` takes the ground-truth object it overlaps most (toycars `masks/`).
     #[arg(long, value_enum, default_value = "clip")]
     pub labels: Labels,
-    /// Where masks come from: `sam` (automatic mask generation) or `gt` (the scene's
-    /// ground-truth masks, to separate segmentation errors from the regularizer's).
+    /// Where masks come from: `sam` (automatic mask generation), `gt` (the scene's
+    /// ground-truth masks, to separate segmentation errors from the regularizer's) or
+    /// `alpha` (the frames' alpha channel as one object, id 0: D-NeRF/Blender RGBA scenes,
+    /// whose object is everything not transparent; --labels is ignored).
     #[arg(long, value_enum, default_value = "sam")]
     pub masks: Masks,
     /// SAM point grid side (32 = SAM's default).
@@ -129,6 +134,9 @@ pub fn run(a: Args) -> Result<()> {
     // SAFETY: the dispatcher calls this first, before the command starts any thread (the
     // progress bar's and rayon's come later), so nothing else touches the environment.
     unsafe { semantics::sam::set_thread_count_env() };
+    if a.masks == Masks::Alpha && a.track {
+        bail!("--masks alpha reads each frame's own silhouette: it does not combine with --track");
+    }
     if a.masks == Masks::Sam && a.sam.is_none() {
         crate::weights::ensure(
             "segment",
@@ -142,6 +150,11 @@ pub fn run(a: Args) -> Result<()> {
         Some(t) if !t.seeds.is_empty() => t.seeds.iter().map(|s| s.name.clone()).collect(),
         _ => a
             .dict
+            .as_deref()
+            .unwrap_or(match a.masks {
+                Masks::Alpha => "object",
+                Masks::Sam | Masks::Gt => "white SUV,yellow sedan,green SUV",
+            })
             .split(',')
             .map(|s| s.trim().to_string())
             .filter(|s| !s.is_empty())
@@ -152,6 +165,7 @@ pub fn run(a: Args) -> Result<()> {
         masks: match a.masks {
             Masks::Sam => MaskSource::Sam,
             Masks::Gt => MaskSource::Gt,
+            Masks::Alpha => MaskSource::Alpha,
         },
         labels: match a.labels {
             Labels::Clip => LabelSource::Clip,

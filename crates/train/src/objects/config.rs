@@ -14,6 +14,20 @@ pub struct ObjectsConfig {
     /// background is sharp enough to read depth from. Before it, object pixels do not
     /// reach the photometric gradient, so the background does not learn the objects.
     pub start_iter: u32,
+    /// Where an object's Gaussians and motion come from. `lift` (the default): lifted from
+    /// its first sighting against the static background at `start_iter`, then tracked
+    /// through its masks. `field` (`adopt.rs`): the deformation field's own Gaussians inside
+    /// its masks, taken over at `field_start_iter` with the parts and trajectories that the
+    /// field's motion of them fits; for scenes with no static background to lift against
+    /// (object-centric captures such as D-NeRF's, whose object is the whole scene).
+    pub source: ObjectSource,
+    /// `source = "field"`: the iteration (of a 40k schedule) at which the field's motion is
+    /// read; until then the field learns the objects as it learns the rest.
+    pub field_start_iter: u32,
+    /// `source = "field"`: an object whose best fit (one rigid body, or its parts) leaves
+    /// an RMS distance to the field's motion above this fraction of its size stays with
+    /// the field.
+    pub field_max_residual: f32,
     /// A mask smaller than this many pixels (at the training resolution) is not a sighting.
     pub min_pixels: u32,
     /// Gaussians lifted from the reference mask of each object (at most).
@@ -152,6 +166,9 @@ impl Default for ObjectsConfig {
         Self {
             enabled: false,
             start_iter: 3000,
+            source: ObjectSource::Lift,
+            field_start_iter: 10000,
+            field_max_residual: 0.05,
             min_pixels: 20,
             lift_points: 3000,
             lift_thickness: vec![0.25, 0.1, 0.5],
@@ -198,6 +215,17 @@ impl Default for ObjectsConfig {
             votes_k: 3,
         }
     }
+}
+
+/// Where the objects' Gaussians and motion come from (`[objects] source`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ObjectSource {
+    /// Lifted from the first sighting and tracked through the masks (`start.rs`).
+    #[default]
+    Lift,
+    /// Taken over from the deformation field (`adopt.rs`).
+    Field,
 }
 
 /// What each object of the ID maps may become (`train --objects=MODE`). Each object's
@@ -256,6 +284,15 @@ impl std::str::FromStr for ObjectsMode {
 }
 
 impl ObjectsConfig {
+    /// The iteration at which the objects start: `start_iter`, or `field_start_iter` for
+    /// objects taken over from the field.
+    pub fn start_at(&self) -> u32 {
+        match self.source {
+            ObjectSource::Lift => self.start_iter,
+            ObjectSource::Field => self.field_start_iter,
+        }
+    }
+
     /// Turns the objects on in `mode`. `rigid` sets `parts = 1`; `parts` and `auto` raise
     /// `parts` to [`MODE_PARTS`] unless the config already allows more than one; `auto`
     /// also sets `min_rigid_iou` to [`AUTO_MIN_RIGID_IOU`] unless the config sets one.
@@ -280,6 +317,7 @@ impl ObjectsConfig {
         Self {
             // ≥ 1: a very short schedule (`--iters 5`) still starts the objects.
             start_iter: at(self.start_iter).max(1),
+            field_start_iter: at(self.field_start_iter).max(1),
             rescale_at: self.rescale_at.iter().map(|&v| at(v)).collect(),
             ..self.clone()
         }
@@ -395,8 +433,14 @@ impl ObjectsConfig {
                 self.votes_k
             ));
         }
-        if self.start_iter == 0 {
-            return Err("objects.start_iter must be ≥ 1".into());
+        if self.start_iter == 0 || self.field_start_iter == 0 {
+            return Err("objects.start_iter and objects.field_start_iter must be ≥ 1".into());
+        }
+        if !(self.field_max_residual.is_finite() && self.field_max_residual > 0.0) {
+            return Err(format!(
+                "objects.field_max_residual must be finite and > 0, got {}",
+                self.field_max_residual
+            ));
         }
         Ok(())
     }

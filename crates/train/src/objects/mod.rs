@@ -26,6 +26,7 @@
 //! After training, [`select`] turns named objects (and `background`) into the rows render
 //! and export keep, and [`export`] writes one object in its own frame with its trajectory.
 
+pub mod adopt;
 pub mod config;
 pub mod contact;
 pub mod export;
@@ -48,7 +49,7 @@ pub mod track;
 pub mod trajectory;
 pub mod truth;
 
-pub use config::{ObjectsConfig, ObjectsMode};
+pub use config::{ObjectSource, ObjectsConfig, ObjectsMode};
 pub use place::NO_OBJECT;
 pub use select::{SelectMode, Selection};
 pub use trajectory::{Pose, Trajectory};
@@ -168,8 +169,9 @@ impl RigidObjects {
 
     /// Before the objects start: zero `dL/dimage` on object pixels of training view `frame`,
     /// so the background is not fitted to objects it will not own.
+    /// Objects taken over from the field are learned by it until then: nothing is masked.
     pub fn mask_background(&self, iteration: u32, frame: usize, dl_dimage: &mut [f32]) {
-        if iteration >= self.cfg.start_iter {
+        if iteration >= self.cfg.start_iter || self.cfg.source == ObjectSource::Field {
             return;
         }
         for (p, &id) in self.id_maps[frame].iter().enumerate() {
@@ -290,7 +292,7 @@ impl RigidObjects {
         hp: AdamHyper,
         aux: &mut crate::state::AuxStore<'_>,
     ) -> bool {
-        let t = iteration.saturating_sub(self.cfg.start_iter).max(1);
+        let t = iteration.saturating_sub(self.cfg.start_at()).max(1);
         self.skin.step(aux, hp, self.cfg.skin_lr, t)
     }
 

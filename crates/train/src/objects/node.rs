@@ -8,7 +8,7 @@
 //! objects before each refinement ([`Node::before_refine`]).
 
 use super::membership::StepPlacement;
-use super::{regauge, start, ObjectsConfig, RigidObjects};
+use super::{adopt, regauge, start, ObjectSource, ObjectsConfig, RigidObjects};
 use crate::adam::AdamHyper;
 use crate::deform::{CanonicalGrads, Deformed};
 use crate::error::{Result, TrainError};
@@ -34,16 +34,26 @@ impl RigidObjects {
         }))
     }
 
-    /// Brings the objects in ([`start`]).
+    /// Brings the objects in: lifted and tracked ([`start`]) or taken over from the field
+    /// ([`adopt`]).
     fn start_now(&mut self, m: Milestone<'_>) -> Result<()> {
         let t0 = Instant::now();
-        start::start(self, m.state, m.dataset, m.rng)?;
+        let iteration = m.iteration;
+        match self.cfg.source {
+            ObjectSource::Lift => {
+                start::start(self, m.state, m.dataset, m.rng)?;
+            }
+            ObjectSource::Field => {
+                let at = (&mut *m.state, m.dataset, &mut *m.earlier);
+                adopt::adopt(self, at, iteration);
+            }
+        }
         if self.cfg.skin {
             let (k, radius) = (self.cfg.parts, self.cfg.skin_radius);
             super::parts::skin::init(m.state, &self.objects, k, radius);
         }
         let seconds = t0.elapsed().as_secs_f64();
-        tracing::info!(iteration = m.iteration, seconds, "rigid objects started");
+        tracing::info!(iteration, seconds, "rigid objects started");
         Ok(())
     }
 
@@ -87,9 +97,12 @@ impl Node for RigidObjects {
     }
 
     fn begin_step(&mut self, m: Milestone<'_>) -> Result<()> {
-        if !self.started && m.iteration >= self.cfg.start_iter {
+        if !self.started && m.iteration >= self.cfg.start_at() {
             self.start_now(m)
-        } else if self.started && self.cfg.rescale_at.contains(&m.iteration) {
+        } else if self.started
+            && self.cfg.source == ObjectSource::Lift
+            && self.cfg.rescale_at.contains(&m.iteration)
+        {
             self.regauge_now(m)
         } else {
             Ok(())

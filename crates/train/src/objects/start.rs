@@ -141,7 +141,7 @@ fn views<'a>(
 }
 
 /// Object IDs present in the ID maps, ascending.
-fn object_ids(maps: &[Vec<u8>]) -> Vec<u8> {
+pub(super) fn object_ids(maps: &[Vec<u8>]) -> Vec<u8> {
     let mut seen = [false; 256];
     for m in maps {
         for &v in m {
@@ -245,7 +245,7 @@ pub fn start(
 }
 
 /// Column IDs no object of the ID maps uses, highest first: the parts' own IDs.
-fn free_ids(maps: &[Vec<u8>]) -> Vec<u8> {
+pub(super) fn free_ids(maps: &[Vec<u8>]) -> Vec<u8> {
     let used = object_ids(maps);
     (0..NO_OBJECT).filter(|i| !used.contains(i)).collect()
 }
@@ -295,7 +295,7 @@ fn add_parts(
     }
 }
 
-fn median(mut v: Vec<f32>) -> f32 {
+pub(super) fn median(mut v: Vec<f32>) -> f32 {
     if v.is_empty() {
         return 0.0;
     }

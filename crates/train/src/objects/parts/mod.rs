@@ -30,6 +30,7 @@
 
 pub mod arap;
 pub mod cluster;
+pub mod from_tracks;
 pub mod joints;
 pub mod merge;
 pub mod skin;

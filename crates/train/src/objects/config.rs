@@ -22,7 +22,9 @@ pub struct ObjectsConfig {
     /// (object-centric captures such as D-NeRF's, whose object is the whole scene).
     pub source: ObjectSource,
     /// `source = "field"`: the iteration (of a 40k schedule) at which the field's motion is
-    /// read; until then the field learns the objects as it learns the rest.
+    /// read; until then the field learns the objects as it learns the rest. Half the
+    /// schedule: on lego a take-over at a quarter found parts the field had not yet moved
+    /// (val 2.5 dB lower, docs/objects.md).
     pub field_start_iter: u32,
     /// `source = "field"`: an object whose best fit (one rigid body, or its parts) leaves
     /// an RMS distance to the field's motion above this fraction of its size stays with
@@ -167,7 +169,7 @@ impl Default for ObjectsConfig {
             enabled: false,
             start_iter: 3000,
             source: ObjectSource::Lift,
-            field_start_iter: 10000,
+            field_start_iter: 20000,
             field_max_residual: 0.05,
             min_pixels: 20,
             lift_points: 3000,

@@ -50,12 +50,7 @@ impl ImageU8 {
     /// Reads any 8/16-bit PNG or JPEG; RGBA is composited over `background` (values in
     /// [0, 1]) as `c·a + bg·(1 − a)`, the way D-NeRF/Deformable-3DGS do.
     pub fn load(path: &Path, background: [f32; 3]) -> Result<Self, SceneError> {
-        let img = image::ImageReader::open(path)
-            .map_err(|e| SceneError::io(path, e))?
-            .with_guessed_format()
-            .map_err(|e| SceneError::io(path, e))?
-            .decode()
-            .map_err(|e| SceneError::image(path, e))?;
+        let img = decode(path)?;
         if !img.color().has_alpha() {
             let rgb = img.into_rgb8();
             let (width, height) = rgb.dimensions();
@@ -169,15 +164,20 @@ impl MaskU8 {
     }
 }
 
-/// Reads an 8-bit grayscale PNG of object IDs. Any other pixel format is refused rather
-/// than converted, since a colour conversion would silently change the IDs.
-pub fn load_mask(path: &Path) -> Result<MaskU8, SceneError> {
-    let img = image::ImageReader::open(path)
+/// Any PNG or JPEG (format guessed from the bytes), with errors naming the file.
+fn decode(path: &Path) -> Result<image::DynamicImage, SceneError> {
+    image::ImageReader::open(path)
         .map_err(|e| SceneError::io(path, e))?
         .with_guessed_format()
         .map_err(|e| SceneError::io(path, e))?
         .decode()
-        .map_err(|e| SceneError::image(path, e))?;
+        .map_err(|e| SceneError::image(path, e))
+}
+
+/// Reads an 8-bit grayscale PNG of object IDs. Any other pixel format is refused rather
+/// than converted, since a colour conversion would silently change the IDs.
+pub fn load_mask(path: &Path) -> Result<MaskU8, SceneError> {
+    let img = decode(path)?;
     match img {
         image::DynamicImage::ImageLuma8(buf) => {
             let (width, height) = buf.dimensions();
@@ -202,12 +202,7 @@ pub fn load_mask(path: &Path) -> Result<MaskU8, SceneError> {
 /// background (D-NeRF, Blender) carry the object's silhouette this way; `segment --masks
 /// alpha` uses it. An image without alpha is refused: it has no silhouette to read.
 pub fn load_alpha_ids(path: &Path) -> Result<MaskU8, SceneError> {
-    let img = image::ImageReader::open(path)
-        .map_err(|e| SceneError::io(path, e))?
-        .with_guessed_format()
-        .map_err(|e| SceneError::io(path, e))?
-        .decode()
-        .map_err(|e| SceneError::image(path, e))?;
+    let img = decode(path)?;
     if !img.color().has_alpha() {
         return Err(SceneError::invalid(
             path,

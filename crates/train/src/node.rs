@@ -206,6 +206,28 @@ pub trait Node: Any + Send + Sync {
     fn as_any_mut(&mut self) -> &mut dyn Any;
 }
 
+/// Every row of `state` placed by `nodes` at `time`, for every view (no camera): what a
+/// milestone reads of the scene the nodes before it make (the objects' regauge and their
+/// take-over from the field).
+pub fn place_state(
+    nodes: &mut [Box<dyn Node>],
+    state: &GaussianState,
+    (time, iteration): (f32, u32),
+    out: &mut Deformed,
+) {
+    let rows = Rows {
+        model: &state.model,
+        column: &state.object,
+        aux: &state.aux,
+    };
+    let at = At {
+        time,
+        camera: None,
+        iteration,
+    };
+    place(nodes, rows, &at, out, &mut StepTimings::default());
+}
+
 /// Places the scene: every row at rest, then each node over its rows, in order.
 pub fn place(
     nodes: &mut [Box<dyn Node>],

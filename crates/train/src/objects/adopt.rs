@@ -25,10 +25,9 @@ use super::track::StillEvidence;
 use super::trajectory::Trajectory;
 use super::{knots::KnotAdam, RigidObject, RigidObjects, NO_OBJECT};
 use crate::deform::Deformed;
-use crate::node::{At, Node, Rows};
+use crate::node::{place_state, Node};
 use crate::quat;
 use crate::state::GaussianState;
-use crate::timing::StepTimings;
 use scene::Dataset;
 
 /// A member lands on its object's mask in more than this share of the views that see it.
@@ -101,7 +100,7 @@ fn members(
     let (mut seen, mut votes) = (vec![0u32; n], vec![0u32; n * k]);
     let mut out = Deformed::default();
     for (f, frame) in ds.train.iter().enumerate() {
-        place_at(state, earlier, frame.time, iteration, &mut out);
+        place_state(earlier, state, (frame.time, iteration), &mut out);
         let (w, h) = (frame.image.width as usize, frame.image.height as usize);
         let map = &node.id_maps[f];
         for i in (0..n).filter(|&i| state.object[i] == NO_OBJECT) {
@@ -137,27 +136,6 @@ fn distinct_times(ds: &Dataset) -> Vec<f32> {
     t
 }
 
-/// Every row placed by the nodes before the objects (the field) at time `t`.
-fn place_at(
-    state: &GaussianState,
-    earlier: &mut [Box<dyn Node>],
-    time: f32,
-    iteration: u32,
-    out: &mut Deformed,
-) {
-    let rows = Rows {
-        model: &state.model,
-        column: &state.object,
-        aux: &state.aux,
-    };
-    let at = At {
-        time,
-        camera: None,
-        iteration,
-    };
-    crate::node::place(earlier, rows, &at, out, &mut StepTimings::default());
-}
-
 /// Where the field puts an object's members at each time: `means[t]` (`members·3`), and
 /// the placed rotations and scales (`members·4`, `members·3`) that the take-over bakes in.
 #[derive(Default)]
@@ -183,7 +161,7 @@ fn tracks(
             .collect()
     };
     for &t in times {
-        place_at(state, earlier, t, iteration, &mut out);
+        place_state(earlier, state, (t, iteration), &mut out);
         for (rows, tr) in members.iter().zip(&mut per_object) {
             tr.means.push(pick(&out.means, rows, 3));
             tr.quats.push(pick(&out.quats, rows, 4));

@@ -63,17 +63,7 @@ impl RigidObjects {
         let t0 = Instant::now();
         let (earlier, it) = (m.earlier, m.iteration);
         let mut background = |st: &GaussianState, time: f32, out: &mut Deformed| {
-            let rows = Rows {
-                model: &st.model,
-                column: &st.object,
-                aux: &st.aux,
-            };
-            let at = At {
-                time,
-                camera: None,
-                iteration: it,
-            };
-            crate::node::place(earlier, rows, &at, out, &mut StepTimings::default());
+            crate::node::place_state(earlier, st, (time, it), out);
         };
         let applied = regauge::regauge(self, m.state, &mut background, m.dataset)?;
         let seconds = t0.elapsed().as_secs_f64();

@@ -192,18 +192,27 @@ fn join_alike(xs: &[Point], ys: &[Vec<Point>], labels: Vec<u32>, rule: Merge) ->
     if k < 2 {
         return labels;
     }
+    // The summed squared distance of the selected groups' points to their tracks under
+    // one motion fitted to them all, and how many (point, time) terms it sums.
     let sq = |sel: &dyn Fn(u32) -> bool| -> (f64, usize) {
-        let pair: Vec<u32> = labels.iter().map(|&l| u32::from(!sel(l))).collect();
-        let m = motions(xs, ys, &pair);
-        let mut e = 0.0;
-        let mut n = 0;
-        for i in (0..labels.len()).filter(|&i| sel(labels[i])) {
-            for (t, y) in ys.iter().enumerate() {
-                e += dist2(m[0][t].apply(xs[i]), y[i]);
-            }
-            n += ys.len();
-        }
-        (e, n)
+        let idx: Vec<usize> = (0..labels.len()).filter(|&i| sel(labels[i])).collect();
+        let src: Vec<Point> = idx.iter().map(|&i| xs[i]).collect();
+        let dst: Vec<Vec<Point>> = ys
+            .iter()
+            .map(|y| idx.iter().map(|&i| y[i]).collect())
+            .collect();
+        let m = &motions(&src, &dst, &vec![0; idx.len()])[0];
+        let e: f64 = dst
+            .iter()
+            .zip(m)
+            .map(|(y, tr)| {
+                src.iter()
+                    .zip(y)
+                    .map(|(&x, &y)| dist2(tr.apply(x), y))
+                    .sum::<f64>()
+            })
+            .sum();
+        (e, idx.len() * ys.len())
     };
     let own: Vec<f64> = (0..k as u32).map(|g| sq(&|l| l == g).0).collect();
     let groups = super::merge::group(k, |a, b| {

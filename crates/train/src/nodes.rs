@@ -36,8 +36,15 @@ fn field(init: &mut NodeInit<'_>) -> Result<Option<Box<dyn Node>>> {
 
 /// The rigid objects' node, when `[objects] enabled`.
 fn rigid_objects(init: &mut NodeInit<'_>) -> Result<Option<Box<dyn Node>>> {
-    let node = RigidObjects::for_run(&init.cfg.objects, init.dataset)?;
-    Ok(node.map(|n| Box::new(n) as Box<dyn Node>))
+    let c = &init.cfg.objects;
+    let Some(mut node) = RigidObjects::for_run(c, init.dataset)? else {
+        return Ok(None);
+    };
+    if c.residual {
+        let field = crate::objects::residual::field_config(c.residual_depth, c.residual_width);
+        node.residual = Some(crate::objects::residual::Residual::new(field, &init.cfg.lr));
+    }
+    Ok(Some(Box::new(node)))
 }
 
 /// The nodes of a run or of a loaded checkpoint, in [`KINDS`] order.

@@ -227,7 +227,14 @@ fn recovered_trajectories_follow_the_true_motion() {
             train::objects::place::rows_by_object(one, &vec![o.id; m.len()], &mut rows);
             let mut d = train::deform::Deformed::default();
             train::deform::apply(&m, None, &mut d);
-            train::objects::place::place(one, &rows, &m, frame.time, &mut d, &mut Vec::new());
+            train::objects::place::place(
+                one,
+                &rows,
+                train::objects::place::Shape::of(&m),
+                frame.time,
+                &mut d,
+                &mut Vec::new(),
+            );
             let depth = train::objects::lift::render_depth(
                 &mut raster,
                 &d.means,

@@ -474,6 +474,45 @@ fn objects_taken_over_from_the_field_survive_densify_and_resume() {
     assert_eq!(reports(&a), reports(&c), "start reports");
 }
 
+/// Objects with a residual field (`[objects] residual`): one field per object of the ID
+/// maps, started at δ = 0 and learning from there; a run stopped after the start resumes
+/// bit-identically, the fields' weights and Adam state included.
+#[test]
+fn objects_with_a_residual_field_learn_it_and_resume() {
+    let cfg = objects_config(|o| o.residual = true);
+    let ds = scene_with_id_maps();
+    let a = trained(&cfg, &ds, 80);
+    let node = a.nodes.get::<RigidObjects>().expect("objects started");
+    let residual = node.residual.as_ref().expect("a residual node");
+    let mut masks: Vec<u8> = residual.fields.iter().map(|f| f.mask).collect();
+    masks.sort_unstable();
+    let mut objects: Vec<u8> = node.objects.iter().map(|o| o.mask).collect();
+    objects.sort_unstable();
+    objects.dedup();
+    assert_eq!(masks, objects, "one field per object");
+    for f in &residual.fields {
+        let head = f.field.mlp.head_range();
+        let learned = f.field.mlp.params[head].iter().any(|&p| p != 0.0);
+        assert!(learned, "object {}: the head left zero", f.mask);
+        assert!(f.adam.step > 0);
+    }
+    let c = stopped_and_resumed(&cfg, &ds);
+    assert_bit_equal(&a, &c);
+    let fields = |t: &Trainer| {
+        let r = t
+            .nodes
+            .get::<RigidObjects>()
+            .unwrap()
+            .residual
+            .as_ref()
+            .unwrap();
+        let f = r.fields.iter();
+        f.map(|f| (f.mask, f.field.mlp.params.clone(), f.adam.clone()))
+            .collect::<Vec<_>>()
+    };
+    assert!(fields(&a) == fields(&c), "residual fields after resuming");
+}
+
 /// The start reports of a short run of [`objects_config`] with `tweak` (25 iterations).
 fn start_reports(tweak: impl FnOnce(&mut ObjectsConfig)) -> Vec<StartReport> {
     let t = trained(&objects_config(tweak), &scene_with_id_maps(), 25);

@@ -32,11 +32,14 @@ pub fn write(r: &LoadedRun, run: &Path, out: &Path, times: &[f32]) -> Result<()>
         file.skinning = skin.map(|(parts, weights)| SkinningWeights { parts, weights });
         scene::io::write_json(&json, &file)
             .with_context(|| format!("writing {}", json.display()))?;
-        let kind = match (&file.skinning, o.is_static) {
+        let mut kind = match (&file.skinning, o.is_static) {
             (Some(s), _) => format!("skinned over {} parts", s.parts.len()),
             (None, true) => "static".into(),
             (None, false) => "moving".into(),
         };
+        if has_residual(r, o.mask) {
+            kind.push_str("; its residual field is not exported: the PLY is its rest shape");
+        }
         println!(
             "{} (ID {}, {kind}): {} Gaussians → {}, {} poses → {}",
             o.name,
@@ -56,6 +59,13 @@ pub fn write(r: &LoadedRun, run: &Path, out: &Path, times: &[f32]) -> Result<()>
         ply.display()
     );
     Ok(())
+}
+
+/// Whether object `mask` of the run has a residual field (`[objects] residual`).
+fn has_residual(r: &LoadedRun, mask: u8) -> bool {
+    let node = r.nodes.get::<train::objects::RigidObjects>();
+    let residual = node.and_then(|n| n.residual.as_ref());
+    residual.is_some_and(|res| res.fields.iter().any(|f| f.mask == mask))
 }
 
 /// One file stem per object: its name made file-safe, with `-<id>` added where two objects

@@ -113,6 +113,14 @@ pub struct ObjectsConfig {
     /// default) turns it off: at 0.01 and 0.1 it lowered the crane's crop by 0.2–0.3 dB
     /// and the hand's by 0.2 dB (docs/objects.md).
     pub arap_weight: f32,
+    /// A residual deformation on top of each object's rigid or articulated motion
+    /// (`residual.rs`): a small Deformable-3DGS field per object, `residual_depth` ×
+    /// `residual_width`, evaluated in the object's frame at the view's time and started at
+    /// δ = 0 when the objects start; its learning rate follows `[lr] field_*`. false (the
+    /// default): object Gaussians keep their shape and move only with their poses.
+    pub residual: bool,
+    pub residual_depth: usize,
+    pub residual_width: usize,
     /// Tracking (time-progressive fitting): iterations of pose fitting per new frame, and of
     /// shape/appearance refinement on already tracked frames after each new frame.
     pub track_pose_iters: u32,
@@ -193,6 +201,9 @@ impl Default for ObjectsConfig {
             skin_radius: 2.0,
             skin_lr: 0.01,
             arap_weight: 0.0,
+            residual: false,
+            residual_depth: 4,
+            residual_width: 64,
             track_pose_iters: 30,
             track_shape_iters: 10,
             track_refine_iters: 1000,
@@ -433,6 +444,12 @@ impl ObjectsConfig {
             return Err(format!(
                 "objects.votes_k must be in 1..=32, got {}",
                 self.votes_k
+            ));
+        }
+        if !(1..=32).contains(&self.residual_depth) || !(1..=1024).contains(&self.residual_width) {
+            return Err(format!(
+                "objects.residual_depth must be in 1..=32 and objects.residual_width in 1..=1024, got {} and {}",
+                self.residual_depth, self.residual_width
             ));
         }
         if self.start_iter == 0 || self.field_start_iter == 0 {

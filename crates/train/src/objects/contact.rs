@@ -50,7 +50,14 @@ pub fn view_ratio(
     let mut d = Deformed::default();
     deform::apply(model, None, &mut d);
     let objects = std::slice::from_ref(object);
-    place::place(objects, &rows, model, time, &mut d, &mut Vec::new());
+    place::place(
+        objects,
+        &rows,
+        place::Shape::of(model),
+        time,
+        &mut d,
+        &mut Vec::new(),
+    );
     let depth = render_depth(
         raster,
         &d.means,

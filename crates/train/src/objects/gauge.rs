@@ -44,7 +44,7 @@ pub fn occlusion_scale(
         place::place(
             std::slice::from_ref(object),
             &rows,
-            model,
+            place::Shape::of(model),
             v.time,
             &mut d,
             &mut poses,

@@ -17,7 +17,8 @@
 //! - every step: [`place`] puts object Gaussians in the world at the view's time and chains
 //!   the gradients back (articulated objects' rows by their skinning weights,
 //!   `parts::skin`, with `parts::arap` between neighbours), [`mask_loss`] adds the
-//!   alpha-against-mask term, [`knots`] steps the trajectories;
+//!   alpha-against-mask term, [`knots`] steps the trajectories; with `residual`, each
+//!   object's small field adds its δ in the object's frame first ([`residual`]);
 //! - densification keeps the column aligned (children inherit their parent's object).
 //!
 //! [`node`] is the scene model's view of all this: the rigid objects as one node kind
@@ -40,6 +41,7 @@ pub mod node;
 pub mod parts;
 pub mod place;
 pub mod regauge;
+pub mod residual;
 pub mod scale;
 pub mod select;
 pub mod smooth;
@@ -122,6 +124,8 @@ pub struct RigidObjects {
     /// Articulated objects' blended placement and its as-rigid-as-possible term.
     pub skin: parts::skin::Skinning,
     arap: parts::arap::Arap,
+    /// Each object's residual field on top of its poses (`[objects] residual`).
+    pub residual: Option<residual::Residual>,
     rows: Vec<Vec<u32>>,
     /// `rows` without the skinned ones (placed and chained back by `skin`).
     rigid_rows: Vec<Vec<u32>>,
@@ -153,6 +157,7 @@ impl RigidObjects {
             names,
             skin: parts::skin::Skinning::default(),
             arap: parts::arap::Arap::default(),
+            residual: None,
             rows: Vec::new(),
             rigid_rows: Vec::new(),
             poses: Vec::new(),
@@ -193,9 +198,13 @@ impl RigidObjects {
         out: &mut Deformed,
     ) {
         place::rows_by_object(&self.objects, column, &mut self.rows);
-        place::place(&self.objects, &self.rows, model, t, out, &mut self.poses);
+        let shape = match &mut self.residual {
+            Some(r) if !r.fields.is_empty() => r.place(&self.objects, model, column, t, out),
+            _ => place::Shape::of(model),
+        };
+        place::place(&self.objects, &self.rows, shape, t, out, &mut self.poses);
         let (objects, poses) = (&self.objects, &self.poses);
-        self.skin.place(objects, poses, model, column, aux, out);
+        self.skin.place(objects, poses, shape, column, aux, out);
     }
 
     /// The as-rigid-as-possible term of the articulated objects for this step's placement
@@ -236,14 +245,17 @@ impl RigidObjects {
     }
 
     /// Chains the object rows' world gradients back (see [`place::backward`]) and collects
-    /// the trajectories' gradients.
+    /// the trajectories' gradients, and the residual fields' (`g_scales`: their δs).
     pub fn backward(
         &mut self,
         model: &GaussianModel,
-        g_means: &[f32],
-        g_quats: &[f32],
+        world: &splat::Gradients,
         canon: &mut CanonicalGrads,
     ) {
+        let (g_means, g_quats) = (&world.means[..], &world.quats[..]);
+        // The shape the last placement placed: the store's, or with the residual's δ.
+        let residual = self.residual.as_ref().and_then(|r| r.shape());
+        let shape = residual.unwrap_or(place::Shape::of(model));
         self.grads.clear();
         self.grads.extend(
             self.objects
@@ -263,7 +275,7 @@ impl RigidObjects {
         place::backward(
             &self.objects,
             rows,
-            model,
+            shape,
             &self.poses,
             place::WorldGrads {
                 means: g_means,
@@ -279,9 +291,12 @@ impl RigidObjects {
             };
             let (objects, poses) = (&self.objects, &self.poses);
             self.skin
-                .backward(objects, poses, model, world, canon, &mut self.grads);
+                .backward(objects, poses, shape, world, canon, &mut self.grads);
         }
         parts::joints::add(&self.joints, &self.objects, &self.poses, &mut self.grads);
+        if let Some(r) = &mut self.residual {
+            r.backward(model, &world.scales, canon);
+        }
     }
 
     /// Adam on the skinning logits of this step's rows; `iteration` counts their steps

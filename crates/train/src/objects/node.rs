@@ -52,6 +52,9 @@ impl RigidObjects {
             let (k, radius) = (self.cfg.parts, self.cfg.skin_radius);
             super::parts::skin::init(m.state, &self.objects, k, radius);
         }
+        if let Some(r) = &mut self.residual {
+            r.ensure(&self.objects, rand::Rng::gen(&mut *m.rng));
+        }
         let seconds = t0.elapsed().as_secs_f64();
         tracing::info!(iteration, seconds, "rigid objects started");
         Ok(())
@@ -140,7 +143,7 @@ impl Node for RigidObjects {
         tm: &mut StepTimings,
     ) {
         let t0 = Instant::now();
-        RigidObjects::backward(self, rows.model, &grads.means, &grads.quats, canon);
+        RigidObjects::backward(self, rows.model, grads, canon);
         tm.record(Phase::Deform, t0);
     }
 
@@ -148,7 +151,9 @@ impl Node for RigidObjects {
     fn step(&mut self, iteration: u32, hp: AdamHyper, aux: &mut AuxStore<'_>) -> bool {
         RigidObjects::step(self, hp);
         let logits_ok = self.step_skin(iteration, hp, aux);
-        logits_ok && self.nonfinite_knot().is_none()
+        let start = self.cfg.start_at();
+        let residual_ok = (self.residual.as_mut()).is_none_or(|r| r.step(iteration, start, hp));
+        logits_ok && residual_ok && self.nonfinite_knot().is_none()
     }
 
     fn before_refine(&self, state: &mut GaussianState, step: &Refining<'_>) {
@@ -171,12 +176,16 @@ impl Node for RigidObjects {
     }
 
     fn nonfinite(&self) -> Option<String> {
-        self.nonfinite_knot()
+        let residual = self.residual.as_ref().and_then(|r| r.nonfinite());
+        self.nonfinite_knot().or(residual)
     }
 
     fn save(&self, out: &mut dyn SectionWriter) {
         out.meta("objects", super::store::metadata(self));
         super::store::write_tensors(self, &mut |name, shape, v| out.tensor(name, shape, v));
+        if let Some(r) = &self.residual {
+            r.save(out);
+        }
     }
 
     /// Trajectories and their Adam state together (a few hundred floats).
@@ -188,7 +197,17 @@ impl Node for RigidObjects {
         self.objects = stored.objects;
         self.knot_adam = stored.knot_adam;
         self.joints = stored.joints;
-        Ok(())
+        match &mut self.residual {
+            Some(r) => r.load(sec, false),
+            None => Ok(()),
+        }
+    }
+
+    fn load_optimizer(&mut self, sec: &dyn SectionReader) -> Result<()> {
+        match &mut self.residual {
+            Some(r) => r.load(sec, true),
+            None => Ok(()),
+        }
     }
 
     fn as_any(&self) -> &dyn Any {

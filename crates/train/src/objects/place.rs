@@ -19,6 +19,25 @@ use crate::quat;
 
 pub use crate::state::NO_OBJECT;
 
+/// The object-frame shape the poses place: means `N·3` and quaternions `N·4` (normalized
+/// here), indexed by store row. Usually the store's own ([`Shape::of`]); with a residual
+/// field, the store's plus the field's δ at the view's time ([`super::residual`]).
+#[derive(Clone, Copy)]
+pub struct Shape<'a> {
+    pub means: &'a [f32],
+    pub quats: &'a [f32],
+}
+
+impl<'a> Shape<'a> {
+    /// The store's parameters as they are.
+    pub fn of(model: &'a GaussianModel) -> Self {
+        Self {
+            means: &model.means,
+            quats: &model.quats,
+        }
+    }
+}
+
 /// Rows of each object (in `objects` order), from the per-Gaussian object column.
 pub fn rows_by_object(objects: &[RigidObject], column: &[u8], out: &mut Vec<Vec<u32>>) {
     let mut slot = [usize::MAX; 256];
@@ -41,7 +60,7 @@ pub fn rows_by_object(objects: &[RigidObject], column: &[u8], out: &mut Vec<Vec<
 pub fn place(
     objects: &[RigidObject],
     rows: &[Vec<u32>],
-    model: &GaussianModel,
+    shape: Shape<'_>,
     t: f32,
     out: &mut Deformed,
     poses: &mut Vec<Pose>,
@@ -51,9 +70,9 @@ pub fn place(
         let pose = o.trajectory.pose(t);
         for &i in rows {
             let i = i as usize;
-            let x = [0, 1, 2].map(|c| model.means[i * 3 + c]);
+            let x = [0, 1, 2].map(|c| shape.means[i * 3 + c]);
             out.means[i * 3..i * 3 + 3].copy_from_slice(&pose.apply(x));
-            let u = quat::normalize(&model.quats[i * 4..i * 4 + 4]).0;
+            let u = quat::normalize(&shape.quats[i * 4..i * 4 + 4]).0;
             out.quats[i * 4..i * 4 + 4].copy_from_slice(&quat::mul(pose.q, u));
         }
         poses.push(pose);
@@ -72,7 +91,7 @@ pub struct WorldGrads<'a> {
 pub fn backward(
     objects: &[RigidObject],
     rows: &[Vec<u32>],
-    model: &GaussianModel,
+    shape: Shape<'_>,
     poses: &[Pose],
     world: WorldGrads<'_>,
     canon: &mut CanonicalGrads,
@@ -86,7 +105,7 @@ pub fn backward(
         for &i in rows {
             let i = i as usize;
             let gx = [0, 1, 2].map(|c| g_means[i * 3 + c]);
-            let x = [0, 1, 2].map(|c| model.means[i * 3 + c]);
+            let x = [0, 1, 2].map(|c| shape.means[i * 3 + c]);
             canon.means[i * 3..i * 3 + 3].copy_from_slice(&quat::rotate_inv(&pose.r, gx));
             for a in 0..3 {
                 g.p[a] += f64::from(gx[a]);
@@ -95,7 +114,7 @@ pub fn backward(
                 }
             }
             let gq: [f32; 4] = std::array::from_fn(|k| g_quats[i * 4 + k]);
-            let (u, norm) = quat::normalize(&model.quats[i * 4..i * 4 + 4]);
+            let (u, norm) = quat::normalize(&shape.quats[i * 4..i * 4 + 4]);
             let du = quat::mul(r_conj, gq);
             canon.quats[i * 4..i * 4 + 4].copy_from_slice(&quat::normalize_vjp(u, norm, du));
             let dr = quat::mul(gq, quat::conj(u));
@@ -154,7 +173,14 @@ mod tests {
             let mut d = Deformed::default();
             deform::apply(m, None, &mut d);
             let mut poses = Vec::new();
-            place(std::slice::from_ref(o), &rows, m, t, &mut d, &mut poses);
+            place(
+                std::slice::from_ref(o),
+                &rows,
+                Shape::of(m),
+                t,
+                &mut d,
+                &mut poses,
+            );
             let a: f64 = d.means.iter().zip(&w).map(|(a, b)| (a * b) as f64).sum();
             a + d
                 .quats
@@ -170,14 +196,21 @@ mod tests {
         let mut d = Deformed::default();
         deform::apply(&m, None, &mut d);
         let mut poses = Vec::new();
-        place(std::slice::from_ref(&o), &rows, &m, t, &mut d, &mut poses);
+        place(
+            std::slice::from_ref(&o),
+            &rows,
+            Shape::of(&m),
+            t,
+            &mut d,
+            &mut poses,
+        );
         let mut canon = CanonicalGrads::default();
         deform::backward(&m, &w, &v, &[0.0; 9], &mut canon);
         let mut tg = vec![TrajectoryGrad::zeros(2)];
         backward(
             std::slice::from_ref(&o),
             &rows,
-            &m,
+            Shape::of(&m),
             &poses,
             WorldGrads {
                 means: &w,

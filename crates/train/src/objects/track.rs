@@ -151,7 +151,7 @@ impl<'a> Tracker<'a> {
         place::place(
             std::slice::from_ref(&self.object),
             &self.rows,
-            &self.model,
+            place::Shape::of(&self.model),
             time,
             &mut self.deformed,
             &mut poses,
@@ -190,7 +190,7 @@ impl<'a> Tracker<'a> {
         place::backward(
             objects,
             &self.rows,
-            &self.model,
+            place::Shape::of(&self.model),
             &poses,
             place::WorldGrads {
                 means: &gr.means,

@@ -182,9 +182,10 @@ mod tests {
         let mut d = Deformed::default();
         crate::deform::apply(m, None, &mut d);
         let mut poses = Vec::new();
-        crate::objects::place::place(o, &rows, m, 0.7, &mut d, &mut poses);
+        let shape = crate::objects::place::Shape::of(m);
+        crate::objects::place::place(o, &rows, shape, 0.7, &mut d, &mut poses);
         let mut s = Skinning::default();
-        s.place(o, &poses, m, c, std::slice::from_ref(a), &mut d);
+        s.place(o, &poses, shape, c, std::slice::from_ref(a), &mut d);
         (s, d)
     }
 

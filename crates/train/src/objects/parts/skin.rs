@@ -22,13 +22,12 @@
 //! (so per-part scores and the mask term see where a Gaussian went), and a Gaussian the
 //! votes bring into the object starts on the part it joined.
 
-use super::super::place::WorldGrads;
+use super::super::place::{Shape, WorldGrads};
 use super::super::trajectory::{Pose, PoseGrad, TrajectoryGrad};
 use super::super::RigidObject;
 use super::cluster::dist2;
 use crate::adam::AdamHyper;
 use crate::deform::{CanonicalGrads, Deformed};
-use crate::model::GaussianModel;
 use crate::quat;
 use crate::state::{AuxRows, AuxStore, GaussianState, NO_OBJECT};
 
@@ -106,7 +105,7 @@ impl Skinning {
         &mut self,
         objects: &[RigidObject],
         poses: &[Pose],
-        model: &GaussianModel,
+        shape: Shape<'_>,
         column: &[u8],
         aux: &[AuxRows],
         out: &mut Deformed,
@@ -137,7 +136,7 @@ impl Skinning {
             let w = &mut self.w[j * k..j * k + slots.len()];
             softmax(z, w);
             let home = poses[slots[self.home[j] as usize]].q;
-            let x = [0, 1, 2].map(|c| model.means[i * 3 + c]);
+            let x = [0, 1, 2].map(|c| shape.means[i * 3 + c]);
             let (mut xw, mut s) = ([0.0f32; 3], [0.0f32; 4]);
             for (p, &slot) in slots.iter().enumerate() {
                 let pose = &poses[slot];
@@ -154,7 +153,7 @@ impl Skinning {
             let (nq, norm) = quat::normalize(&s);
             self.blend[j] = nq;
             self.s_norm[j] = norm;
-            let u = quat::normalize(&model.quats[i * 4..i * 4 + 4]).0;
+            let u = quat::normalize(&shape.quats[i * 4..i * 4 + 4]).0;
             out.means[i * 3..i * 3 + 3].copy_from_slice(&xw);
             out.quats[i * 4..i * 4 + 4].copy_from_slice(&quat::mul(nq, u));
         }
@@ -172,7 +171,7 @@ impl Skinning {
         &mut self,
         objects: &[RigidObject],
         poses: &[Pose],
-        model: &GaussianModel,
+        shape: Shape<'_>,
         world: WorldGrads<'_>,
         canon: &mut CanonicalGrads,
         traj_grads: &mut [TrajectoryGrad],
@@ -186,8 +185,8 @@ impl Skinning {
             let slots = &self.groups[self.group[j] as usize];
             let gx = [0, 1, 2].map(|c| world.means[i * 3 + c]);
             let gq: [f32; 4] = std::array::from_fn(|c| world.quats[i * 4 + c]);
-            let x = [0, 1, 2].map(|c| model.means[i * 3 + c]);
-            let (u, unorm) = quat::normalize(&model.quats[i * 4..i * 4 + 4]);
+            let x = [0, 1, 2].map(|c| shape.means[i * 3 + c]);
+            let (u, unorm) = quat::normalize(&shape.quats[i * 4..i * 4 + 4]);
             let nq = self.blend[j];
             let dn = quat::mul(gq, quat::conj(u));
             let du = quat::mul(quat::conj(nq), gq);
@@ -385,6 +384,7 @@ fn dot4(a: [f32; 4], b: [f32; 4]) -> f32 {
 mod tests {
     use super::*;
     use crate::deform;
+    use crate::model::GaussianModel;
     use crate::objects::place;
     use crate::objects::trajectory::Trajectory;
 
@@ -448,9 +448,16 @@ mod tests {
         let mut d = Deformed::default();
         deform::apply(m, None, &mut d);
         let mut poses = Vec::new();
-        place::place(objs, &rows, m, t, &mut d, &mut poses);
+        place::place(objs, &rows, place::Shape::of(m), t, &mut d, &mut poses);
         let mut s = Skinning::default();
-        s.place(objs, &poses, m, &COLUMN, std::slice::from_ref(aux), &mut d);
+        s.place(
+            objs,
+            &poses,
+            Shape::of(m),
+            &COLUMN,
+            std::slice::from_ref(aux),
+            &mut d,
+        );
         (s, d, poses)
     }
 
@@ -486,7 +493,7 @@ mod tests {
             means: &a,
             quats: &b,
         };
-        s.backward(&o, &poses, &m, world, &mut canon, &mut tg);
+        s.backward(&o, &poses, Shape::of(&m), world, &mut canon, &mut tg);
         let h = 1e-3;
         type Edit<'a> = &'a dyn Fn(&mut GaussianModel, &mut Vec<RigidObject>, &mut AuxRows, f32);
         let fd = |f: Edit| {

@@ -142,7 +142,14 @@ impl<'a> PartsTracker<'a> {
         deform::apply(&self.model, None, &mut self.deformed);
         let mut poses = Vec::new();
         let (parts, rows, model) = (&self.parts, &self.rows, &self.model);
-        place::place(parts, rows, model, time, &mut self.deformed, &mut poses);
+        place::place(
+            parts,
+            rows,
+            place::Shape::of(model),
+            time,
+            &mut self.deformed,
+            &mut poses,
+        );
         poses
     }
 
@@ -191,7 +198,7 @@ impl<'a> PartsTracker<'a> {
         place::backward(
             &self.parts,
             &self.rows,
-            &self.model,
+            place::Shape::of(&self.model),
             &poses,
             world,
             &mut self.canon,

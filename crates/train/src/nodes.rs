@@ -42,7 +42,9 @@ fn rigid_objects(init: &mut NodeInit<'_>) -> Result<Option<Box<dyn Node>>> {
     };
     if c.residual {
         let field = crate::objects::residual::field_config(c.residual_depth, c.residual_width);
-        node.residual = Some(crate::objects::residual::Residual::new(field, &init.cfg.lr));
+        let l = &init.cfg.lr;
+        let lr = (l.field_init, l.field_final, l.field_max_steps);
+        node.residual = Some(crate::objects::residual::Residual::new(field, lr));
     }
     Ok(Some(Box::new(node)))
 }

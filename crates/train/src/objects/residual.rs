@@ -17,7 +17,6 @@
 use super::place::Shape;
 use super::RigidObject;
 use crate::adam::{expon_lr, Adam, AdamHyper};
-use crate::config::LrConfig;
 use crate::deform::{CanonicalGrads, Deformed};
 use crate::error::Result;
 use crate::field::{DeformField, DeformOutput, FieldConfig};
@@ -65,10 +64,12 @@ pub fn field_config(depth: usize, width: usize) -> FieldConfig {
 }
 
 impl Residual {
-    pub fn new(cfg: FieldConfig, lr: &LrConfig) -> Self {
+    /// `lr`: the main field's schedule (`[lr] field_init`, `field_final`,
+    /// `field_max_steps`), which [`Residual::step`] restarts at the objects' start.
+    pub fn new(cfg: FieldConfig, lr: (f32, f32, u32)) -> Self {
         Self {
             cfg,
-            lr: (lr.field_init, lr.field_final, lr.field_max_steps),
+            lr,
             fields: Vec::new(),
             means: Vec::new(),
             quats: Vec::new(),
@@ -308,7 +309,7 @@ mod tests {
             head_init_scale: 1.0,
             ..field_config(2, 8)
         };
-        let mut r = Residual::new(cfg, &LrConfig::default());
+        let mut r = Residual::new(cfg, (8e-4, 1.6e-6, 1000));
         r.ensure(&objects(), 7);
         r
     }

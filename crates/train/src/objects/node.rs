@@ -110,6 +110,9 @@ impl Node for RigidObjects {
         let t0 = Instant::now();
         RigidObjects::place(self, rows.model, rows.column, rows.aux, at.time, out);
         tm.record(Phase::Deform, t0);
+        if let Some(r) = &self.residual {
+            tm.move_seconds(Phase::Deform, Phase::FieldForward, r.seconds.0);
+        }
     }
 
     fn after_render(&mut self, r: Rendered<'_>, aux: &mut AuxStore) -> Result<()> {
@@ -145,6 +148,9 @@ impl Node for RigidObjects {
         let t0 = Instant::now();
         RigidObjects::backward(self, rows.model, grads, canon);
         tm.record(Phase::Deform, t0);
+        if let Some(r) = &self.residual {
+            tm.move_seconds(Phase::Deform, Phase::FieldBackward, r.seconds.1);
+        }
     }
 
     /// Adam on the knots and the skinning logits; whether every value is finite after it.

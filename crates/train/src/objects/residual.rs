@@ -46,6 +46,9 @@ pub struct Residual {
     /// This step's shape: the store's means and quaternions, with δ on object rows.
     means: Vec<f32>,
     quats: Vec<f32>,
+    /// Seconds of the last [`Residual::place`] and [`Residual::backward`], so the node
+    /// can count them as the field's phases rather than as placement.
+    pub seconds: (f64, f64),
 }
 
 /// The field of one object: `depth × width`, Deformable-3DGS's encodings, no time network,
@@ -73,6 +76,7 @@ impl Residual {
             fields: Vec::new(),
             means: Vec::new(),
             quats: Vec::new(),
+            seconds: (0.0, 0.0),
         }
     }
 
@@ -98,6 +102,7 @@ impl Residual {
         t: f32,
         out: &mut Deformed,
     ) -> Shape<'_> {
+        let t0 = std::time::Instant::now();
         self.means.clone_from(&model.means);
         self.quats.clone_from(&model.quats);
         let by_mask = super::column_by_mask(objects, column);
@@ -121,6 +126,7 @@ impl Residual {
                     .for_each(|((q, u), d)| *q = u + d);
             }
         }
+        self.seconds.0 = t0.elapsed().as_secs_f64();
         Shape {
             means: &self.means,
             quats: &self.quats,
@@ -146,6 +152,7 @@ impl Residual {
         g_scales: &[f32],
         canon: &mut CanonicalGrads,
     ) {
+        let t0 = std::time::Instant::now();
         let n = model.len();
         for f in &mut self.fields {
             f.grad.reset(n);
@@ -160,6 +167,7 @@ impl Residual {
             }
             f.field.backward(&f.grad, &mut f.weight_grad);
         }
+        self.seconds.1 = t0.elapsed().as_secs_f64();
     }
 
     /// Adam on every field at `iteration`; whether every weight is finite after it. The

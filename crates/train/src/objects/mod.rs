@@ -199,7 +199,7 @@ impl RigidObjects {
     ) {
         place::rows_by_object(&self.objects, column, &mut self.rows);
         let shape = match &mut self.residual {
-            Some(r) if !r.fields.is_empty() => r.place(&self.objects, model, column, t, out),
+            Some(r) if !r.fields.is_empty() => r.place(&self.objects, &self.rows, model, t, out),
             _ => place::Shape::of(model),
         };
         place::place(&self.objects, &self.rows, shape, t, out, &mut self.poses);

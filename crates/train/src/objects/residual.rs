@@ -92,24 +92,29 @@ impl Residual {
         }
     }
 
-    /// Evaluates every object's field at `t` on its rows, writes δs into `out`'s scales
-    /// (which hold the rest scales there) and returns the shape the poses place.
+    /// Evaluates every object's field at `t` on its rows (`rows` per `objects` slot, as
+    /// `place::rows_by_object` gives them; an object's parts share its field), writes δs
+    /// into `out`'s scales (which hold the rest scales there) and returns the shape the
+    /// poses place.
     pub fn place(
         &mut self,
         objects: &[RigidObject],
+        rows: &[Vec<u32>],
         model: &GaussianModel,
-        column: &[u8],
         t: f32,
         out: &mut Deformed,
     ) -> Shape<'_> {
         let t0 = std::time::Instant::now();
         self.means.clone_from(&model.means);
         self.quats.clone_from(&model.quats);
-        let by_mask = super::column_by_mask(objects, column);
         for f in &mut self.fields {
             f.rows.clear();
-            let mine = by_mask.iter().enumerate().filter(|&(_, &m)| m == f.mask);
-            f.rows.extend(mine.map(|(i, _)| i as u32));
+            for (o, r) in objects.iter().zip(rows) {
+                if o.mask == f.mask {
+                    f.rows.extend_from_slice(r);
+                }
+            }
+            f.rows.sort_unstable();
             f.field.forward(&model.means, t, &f.rows, &mut f.delta);
             for &i in &f.rows {
                 let i = i as usize;
@@ -329,7 +334,7 @@ mod tests {
         place::rows_by_object(&objs, &COLUMN, &mut rows);
         let mut d = Deformed::default();
         deform::apply(m, None, &mut d);
-        let shape = r.place(&objs, m, &COLUMN, 0.3, &mut d);
+        let shape = r.place(&objs, &rows, m, 0.3, &mut d);
         place::place(&objs, &rows, shape, 0.3, &mut d, &mut Vec::new());
         let dot =
             |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| f64::from(x * y)).sum::<f64>();
@@ -350,7 +355,7 @@ mod tests {
         let mut d = Deformed::default();
         deform::apply(&m, None, &mut d);
         let mut poses = Vec::new();
-        let shape = r.place(&objs, &m, &COLUMN, 0.3, &mut d);
+        let shape = r.place(&objs, &rows, &m, 0.3, &mut d);
         place::place(&objs, &rows, shape, 0.3, &mut d, &mut poses);
         assert!(r.fields[0].delta.dx.iter().any(|&x| x.abs() > 1e-3));
         let mut canon = CanonicalGrads::default();
@@ -424,7 +429,9 @@ mod tests {
         let mut d = Deformed::default();
         deform::apply(&m, None, &mut d);
         let rest_scales = d.scales.clone();
-        let shape = r.place(&objs, &m, &COLUMN, 0.5, &mut d);
+        let mut rows = Vec::new();
+        place::rows_by_object(&objs, &COLUMN, &mut rows);
+        let shape = r.place(&objs, &rows, &m, 0.5, &mut d);
         assert_eq!(shape.means[3..6], m.means[3..6]);
         assert_eq!(shape.quats[4..8], m.quats[4..8]);
         assert_eq!(d.scales[3..6], rest_scales[3..6]);

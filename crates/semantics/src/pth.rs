@@ -29,10 +29,7 @@ pub(crate) fn check(path: &Path) -> Result<(), String> {
     let mut sizes = HashMap::new();
     for i in 0..zip.len() {
         let mut entry = zip.by_index(i).map_err(|e| format!("zip entry {i}: {e}"))?;
-        let name = entry
-            .name()
-            .map_err(|e| format!("zip entry {i}: {e}"))?
-            .into_owned();
+        let name = entry.name().to_owned();
         sizes.insert(name.clone(), entry.size());
         if name.ends_with("data.pkl") {
             let mut pickle = Vec::new();

@@ -41,6 +41,8 @@ macro_rules! dispatch {
     };
 }
 
+pub(crate) use dispatch;
+
 const LANES: usize = 16;
 
 /// Sum with `LANES` independent accumulators, so the loop vectorizes.
@@ -205,6 +207,21 @@ dispatch! {
 }
 
 dispatch! {
+    /// Softmax of each `len`-long row of `x` after `x·scale + bias` (TinyViT's window attention:
+    /// scaled scores plus the learned relative-position bias), in place; `bias` has the length
+    /// of `x`.
+    fn softmax_rows_biased(x: &mut [f32], bias: &[f32], len: usize, scale: f32) {
+        for (g, b) in x.chunks_exact_mut(len).zip(bias.chunks_exact(len)) {
+            g.iter_mut().zip(b).for_each(|(v, &b)| *v = *v * scale + b);
+            let mx = max(g);
+            g.iter_mut().for_each(|v| *v = exp_approx(*v - mx));
+            let inv = 1.0 / sum(g);
+            g.iter_mut().for_each(|v| *v *= inv);
+        }
+    }
+}
+
+dispatch! {
     /// Softmax down each column of a row-major matrix with `cols` columns, after multiplying
     /// by `scale`, in place. The loops run along rows, so they vectorize across columns.
     fn softmax_columns(x: &mut [f32], cols: usize, scale: f32) {
@@ -320,6 +337,30 @@ mod tests {
             for (&a, &b) in g.iter().zip(h) {
                 let want = (((a - mx) * 0.25) as f64).exp() / z;
                 assert!((b as f64 - want).abs() < 1e-6 * want.max(1e-3));
+            }
+        }
+    }
+
+    #[test]
+    fn biased_softmax_matches_naive() {
+        let len = 49;
+        let x: Vec<f32> = (0..len * 3)
+            .map(|i| ((i * 37 % 101) as f32 - 50.0) * 0.3)
+            .collect();
+        let bias: Vec<f32> = (0..len * 3)
+            .map(|i| ((i * 13 % 29) as f32 - 14.0) * 0.2)
+            .collect();
+        let mut got = x.clone();
+        softmax_rows_biased(&mut got, &bias, len, 0.17);
+        for r in 0..3 {
+            let z: Vec<f64> = (0..len)
+                .map(|j| f64::from(x[r * len + j]) * 0.17 + f64::from(bias[r * len + j]))
+                .collect();
+            let mx = z.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+            let total: f64 = z.iter().map(|v| (v - mx).exp()).sum();
+            for j in 0..len {
+                let want = (z[j] - mx).exp() / total;
+                assert!((f64::from(got[r * len + j]) - want).abs() < 1e-6);
             }
         }
     }

@@ -7,7 +7,9 @@
 //! encoder and mask decoder are re-implemented here on plain f32 buffers (see `decoder.rs` for
 //! why), loading the same checkpoint keys as the official `segment_anything` code.
 
+pub mod conv_bn;
 pub mod decoder;
+pub mod dense;
 pub mod elementwise;
 pub mod kernels;
 pub mod layers;
@@ -42,11 +44,11 @@ pub enum SamError {
 }
 
 /// Sets `RAYON_NUM_THREADS` (when unset) to this machine's available parallelism, the count
-/// rayon uses by default anyway. Why: candle-core 0.11 looks its thread count up on every
-/// matmul and convolution tile (`utils::get_num_threads`), and without that variable (or a
-/// `cpu_capacity` file in sysfs) it calls `num_cpus::get_physical()`, which parses
-/// `/proc/cpuinfo` each time: ~11% of the MobileSAM encoder's samples in `perf` on this
-/// machine. With the variable set, candle uses that count, as does rayon's global pool.
+/// rayon uses by default anyway. Why: candle-core looks its thread count up on every
+/// matrix product (`utils::get_num_threads`), and without that variable it asks `num_cpus`,
+/// which reads files under `/proc` (and, in some candle versions, all of `/proc/cpuinfo`) each
+/// time: up to ~11% of the MobileSAM encoder's samples in `perf`. With the variable set,
+/// candle uses that count, as does rayon's global pool.
 ///
 /// # Safety
 /// Writes the process environment: call at program start, while no other thread can read or

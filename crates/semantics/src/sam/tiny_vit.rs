@@ -1,23 +1,27 @@
-//! MobileSAM's TinyViT-5M image encoder: adapted from candle-transformers 0.11's
+//! MobileSAM's TinyViT-5M image encoder: adapted from candle-transformers'
 //! `segment_anything/tiny_vit.rs` (MIT OR Apache-2.0, itself adapted from
-//! <https://github.com/ChaoningZhang/MobileSAM/blob/master/mobile_sam/modeling/tiny_vit_sam.py>)
-//! with one change: every GELU is the exact erf form that the official code's `nn.GELU` computes
-//! (candle's `Tensor::gelu` is the tanh approximation), run as a custom op that is vectorized
-//! (`elementwise::gelu_inplace`, runtime-dispatched SIMD) and split over rayon's threads;
-//! candle's unary ops run one scalar `tanhf` per element on one thread (~15% of the encoder's
-//! profile). Tracing spans dropped.
+//! <https://github.com/ChaoningZhang/MobileSAM/blob/master/mobile_sam/modeling/tiny_vit_sam.py>).
+//! The same layers and weights; what differs is how they run on the CPU:
+//! - every GELU is the exact erf form that the official code's `nn.GELU` computes (candle's
+//!   `Tensor::gelu` is the tanh approximation), vectorized (`elementwise::gelu_inplace`,
+//!   runtime-dispatched SIMD) and split over rayon's threads, fused into the pass that writes
+//!   its input where one exists;
+//! - `Conv2d_BN` has its batch norm folded in, and its depthwise and pointwise kernels are ours
+//!   (`conv_bn.rs`: candle runs a depthwise convolution as one convolution per channel);
+//! - the linear layers are one pass each with their bias, GELU or residual (`dense.rs`);
+//! - the window attention's scale, relative-position bias and softmax are one pass
+//!   (`BiasedSoftmax`).
+//!
+//! docs/performance.md "Tracking" has the measurements. Tracing spans dropped.
 
-use candle_core::{CpuStorage, CustomOp1, IndexOp, Layout, Result, Shape, Tensor, D};
-use candle_nn::{Conv2dConfig, Linear, Module, VarBuilder};
+use candle_core::{CpuStorage, CustomOp1, CustomOp2, IndexOp, Layout, Result, Shape, Tensor, D};
+use candle_nn::{Module, VarBuilder};
 use rayon::prelude::*;
 
-use super::elementwise::gelu_inplace;
+use super::conv_bn::Conv2dBN;
+use super::dense::{Dense, Then};
+use super::elementwise::{gelu_inplace, softmax_rows_biased};
 use super::norm::LayerNorm2d;
-
-/// `nn.Linear(in_, out, bias)` under `vb`.
-fn linear(vb: VarBuilder, in_: usize, out: usize, bias: bool) -> Result<Linear> {
-    candle_nn::linear_b(in_, out, bias, vb)
-}
 
 /// Exact GELU over a contiguous f32 tensor (see the module comment).
 struct GeluErf;
@@ -46,7 +50,59 @@ trait GeluExt {
 
 impl GeluExt for Tensor {
     fn gelu_erf_simd(&self) -> Result<Tensor> {
-        self.contiguous()?.apply_op1_no_bwd(&GeluErf)
+        gelu(self)
+    }
+}
+
+/// Exact GELU of a tensor (any layout), vectorized and multi-threaded.
+pub(crate) fn gelu(xs: &Tensor) -> Result<Tensor> {
+    xs.contiguous()?.apply_op1_no_bwd(&GeluErf)
+}
+
+/// `softmax(scores·scale + ab)` over the last axis, the relative-position bias `ab`
+/// (heads × N × N) broadcast over the windows: one pass per row instead of candle's scale,
+/// broadcast add and scalar-`exp` softmax (three passes over the scores).
+struct BiasedSoftmax {
+    scale: f32,
+}
+
+impl CustomOp2 for BiasedSoftmax {
+    fn name(&self) -> &'static str {
+        "biased-softmax"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+    ) -> Result<(CpuStorage, Shape)> {
+        let (CpuStorage::F32(x), CpuStorage::F32(ab)) = (s1, s2) else {
+            candle_core::bail!("biased-softmax: f32 tensors only");
+        };
+        let (Some((x0, x1)), Some((b0, b1))) = (l1.contiguous_offsets(), l2.contiguous_offsets())
+        else {
+            candle_core::bail!("biased-softmax: contiguous tensors only");
+        };
+        let n = l1.shape().dims().last().copied().unwrap_or(0);
+        let per_bias = b1 - b0;
+        if n == 0 || per_bias == 0 || (x1 - x0) % per_bias != 0 || per_bias % (n * n) != 0 {
+            candle_core::bail!(
+                "biased-softmax: scores {:?} do not repeat bias {:?}",
+                l1.shape(),
+                l2.shape()
+            );
+        }
+        let bias = &ab[b0..b1];
+        let mut out = x[x0..x1].to_vec();
+        out.par_chunks_mut(n * n)
+            .enumerate()
+            .for_each(|(i, chunk)| {
+                let b = &bias[(i * n * n) % per_bias..][..n * n];
+                softmax_rows_biased(chunk, b, n, self.scale);
+            });
+        Ok((CpuStorage::F32(out), l1.shape().clone()))
     }
 }
 
@@ -55,26 +111,6 @@ const MLP_RATIO: usize = 4;
 const LOCAL_CONV_SIZE: usize = 3;
 const IMG_SIZE: usize = 1024;
 const IN_CHANNELS: usize = 3;
-
-#[derive(Debug)]
-struct Conv2dBN {
-    c: candle_nn::Conv2d,
-    bn: candle_nn::BatchNorm,
-}
-
-impl Conv2dBN {
-    fn new(in_: usize, out: usize, ks: usize, cfg: Conv2dConfig, vb: VarBuilder) -> Result<Self> {
-        let c = candle_nn::conv2d_no_bias(in_, out, ks, cfg, vb.pp("c"))?;
-        let bn = candle_nn::batch_norm(out, 1e-5, vb.pp("bn"))?;
-        Ok(Self { c, bn })
-    }
-}
-
-impl Module for Conv2dBN {
-    fn forward(&self, xs: &Tensor) -> Result<Tensor> {
-        xs.apply(&self.c)?.apply_t(&self.bn, false)
-    }
-}
 
 #[derive(Debug)]
 struct PatchEmbed {
@@ -97,7 +133,7 @@ impl PatchEmbed {
 
 impl Module for PatchEmbed {
     fn forward(&self, xs: &Tensor) -> Result<Tensor> {
-        xs.apply(&self.conv1)?.gelu_erf_simd()?.apply(&self.conv2)
+        self.conv1.forward_gelu(xs, true)?.apply(&self.conv2)
     }
 }
 
@@ -130,12 +166,8 @@ impl MBConv {
 impl Module for MBConv {
     fn forward(&self, xs: &Tensor) -> Result<Tensor> {
         let shortcut = xs;
-        let xs = xs
-            .apply(&self.conv1)?
-            .gelu_erf_simd()?
-            .apply(&self.conv2)?
-            .gelu_erf_simd()?
-            .apply(&self.conv3)?;
+        let xs = self.conv1.forward_gelu(xs, true)?;
+        let xs = self.conv2.forward_gelu(&xs, true)?.apply(&self.conv3)?;
         (xs + shortcut)?.gelu_erf_simd()
     }
 }
@@ -183,10 +215,9 @@ impl Module for PatchMerging {
         } else {
             xs.clone()
         };
-        xs.apply(&self.conv1)?
-            .gelu_erf_simd()?
-            .apply(&self.conv2)?
-            .gelu_erf_simd()?
+        let xs = self.conv1.forward_gelu(&xs, true)?;
+        self.conv2
+            .forward_gelu(&xs, true)?
             .apply(&self.conv3)?
             .flatten_from(2)?
             .transpose(1, 2)
@@ -241,33 +272,32 @@ impl Module for ConvLayer {
 #[derive(Debug)]
 struct Mlp {
     norm: candle_nn::LayerNorm,
-    fc1: Linear,
-    fc2: Linear,
+    fc1: Dense,
+    fc2: Dense,
 }
 
 impl Mlp {
     fn new(in_: usize, hidden: usize, vb: VarBuilder) -> Result<Self> {
         let norm = candle_nn::layer_norm(in_, 1e-5, vb.pp("norm"))?;
-        let fc1 = linear(vb.pp("fc1"), in_, hidden, true)?;
-        let fc2 = linear(vb.pp("fc2"), hidden, in_, true)?;
+        let fc1 = Dense::new(in_, hidden, vb.pp("fc1"))?;
+        let fc2 = Dense::new(hidden, in_, vb.pp("fc2"))?;
         Ok(Self { norm, fc1, fc2 })
     }
 }
 
-impl Module for Mlp {
-    fn forward(&self, xs: &Tensor) -> Result<Tensor> {
-        xs.apply(&self.norm)?
-            .apply(&self.fc1)?
-            .gelu_erf_simd()?
-            .apply(&self.fc2)
+impl Mlp {
+    /// `xs + fc2(GELU(fc1(norm(xs))))`: the block's MLP with its residual.
+    fn forward_residual(&self, xs: &Tensor) -> Result<Tensor> {
+        let h = self.fc1.forward(&xs.apply(&self.norm)?, Then::Gelu)?;
+        self.fc2.forward_add(&h, xs)
     }
 }
 
 #[derive(Debug)]
 struct Attention {
     norm: candle_nn::LayerNorm,
-    qkv: Linear,
-    proj: Linear,
+    qkv: Dense,
+    proj: Dense,
     ab: Tensor,
     key_dim: usize,
     num_heads: usize,
@@ -290,8 +320,8 @@ impl Attention {
         let nh_kd = key_dim * num_heads;
         let h = dh + nh_kd * 2;
         let norm = candle_nn::layer_norm(dim, 1e-5, vb.pp("norm"))?;
-        let qkv = linear(vb.pp("qkv"), dim, h, true)?;
-        let proj = linear(vb.pp("proj"), dh, dim, true)?;
+        let qkv = Dense::new(dim, h, vb.pp("qkv"))?;
+        let proj = Dense::new(dh, dim, vb.pp("proj"))?;
 
         let points = (0..resolution.0)
             .flat_map(|x| (0..resolution.1).map(move |y| (x as i64, y as i64)))
@@ -330,7 +360,10 @@ impl Module for Attention {
     fn forward(&self, xs: &Tensor) -> Result<Tensor> {
         let (b, n, _) = xs.dims3()?;
         let xs = xs.apply(&self.norm)?;
-        let qkv = xs.apply(&self.qkv)?.reshape((b, n, self.num_heads, ()))?;
+        let qkv = self
+            .qkv
+            .forward(&xs, Then::Nothing)?
+            .reshape((b, n, self.num_heads, ()))?;
         let q = qkv
             .narrow(D::Minus1, 0, self.key_dim)?
             .permute((0, 2, 1, 3))?
@@ -343,13 +376,15 @@ impl Module for Attention {
             .narrow(D::Minus1, 2 * self.key_dim, self.d)?
             .permute((0, 2, 1, 3))?
             .contiguous()?;
-        let attn = { (q.matmul(&k.t()?)? * self.scale)? };
-        let attn = attn.broadcast_add(&self.ab)?;
-        let attn = { candle_nn::ops::softmax_last_dim(&attn)? };
-        let attn = { attn.matmul(&v)? };
-        attn.transpose(1, 2)?
-            .reshape((b, n, self.dh))?
-            .apply(&self.proj)
+        let attn = q.matmul(&k.t()?)?.apply_op2_no_bwd(
+            &self.ab,
+            &BiasedSoftmax {
+                scale: self.scale as f32,
+            },
+        )?;
+        let attn = attn.matmul(&v)?;
+        let attn = attn.transpose(1, 2)?.reshape((b, n, self.dh))?;
+        self.proj.forward(&attn, Then::Nothing)
     }
 }
 
@@ -449,7 +484,7 @@ impl Module for TinyViTBlock {
             .apply(&self.local_conv)?
             .reshape((b, c, l))?
             .transpose(1, 2)?;
-        &xs + self.mlp.forward(&xs)?
+        self.mlp.forward_residual(&xs)
     }
 }
 

@@ -117,7 +117,7 @@ impl Conv2dBN {
                     .conv2d(w, cfg.padding, cfg.stride, cfg.dilation, cfg.groups)?
                     .broadcast_add(bias)?;
                 if gelu {
-                    super::tiny_vit::gelu(&y)
+                    super::tensor_ops::gelu(&y)
                 } else {
                     Ok(y)
                 }
@@ -397,7 +397,7 @@ mod tests {
             "{cin}→{cout} k{ks} {cfg:?} on {shape:?}: max |Δ| = {d}"
         );
         let with_gelu = fast.forward_gelu(&x, true).unwrap();
-        let want_gelu = super::super::tiny_vit::gelu(&want).unwrap();
+        let want_gelu = super::super::tensor_ops::gelu(&want).unwrap();
         let d = max_abs_diff(&with_gelu, &want_gelu);
         assert!(d < 2e-5, "with GELU: max |Δ| = {d}");
     }

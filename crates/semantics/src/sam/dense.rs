@@ -203,7 +203,7 @@ mod tests {
         let want = linear_reference(&x, n_in, n_out, vb(n_in, n_out)).unwrap();
         let d = max_abs_diff(&dense.forward(&x, Then::Nothing).unwrap(), &want);
         assert!(d < 1e-5, "plain: {d}");
-        let want_gelu = super::super::tiny_vit::gelu(&want).unwrap();
+        let want_gelu = super::super::tensor_ops::gelu(&want).unwrap();
         let d = max_abs_diff(&dense.forward(&x, Then::Gelu).unwrap(), &want_gelu);
         assert!(d < 1e-5, "GELU: {d}");
         let res = t(&[3, 37, n_out], 9);

@@ -18,6 +18,7 @@ pub mod norm;
 pub mod predict;
 pub mod prompt;
 pub mod resize;
+pub mod tensor_ops;
 pub mod tiny_vit;
 
 pub use decoder::{ImageContext, MaskDecoder, Outputs, PromptMasks, Scratch};

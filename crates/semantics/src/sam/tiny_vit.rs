@@ -10,101 +10,17 @@
 //!   (`conv_bn.rs`: candle runs a depthwise convolution as one convolution per channel);
 //! - the linear layers are one pass each with their bias, GELU or residual (`dense.rs`);
 //! - the window attention's scale, relative-position bias and softmax are one pass
-//!   (`BiasedSoftmax`).
+//!   (`tensor_ops::BiasedSoftmax`).
 //!
 //! docs/performance.md "Tracking" has the measurements. Tracing spans dropped.
 
-use candle_core::{CpuStorage, CustomOp1, CustomOp2, IndexOp, Layout, Result, Shape, Tensor, D};
+use candle_core::{IndexOp, Result, Tensor, D};
 use candle_nn::{Module, VarBuilder};
-use rayon::prelude::*;
 
 use super::conv_bn::Conv2dBN;
 use super::dense::{Dense, Then};
-use super::elementwise::{gelu_inplace, softmax_rows_biased};
 use super::norm::LayerNorm2d;
-
-/// Exact GELU over a contiguous f32 tensor (see the module comment).
-struct GeluErf;
-
-impl CustomOp1 for GeluErf {
-    fn name(&self) -> &'static str {
-        "gelu-erf-simd"
-    }
-
-    fn cpu_fwd(&self, storage: &CpuStorage, layout: &Layout) -> Result<(CpuStorage, Shape)> {
-        let CpuStorage::F32(v) = storage else {
-            candle_core::bail!("gelu-erf-simd: f32 tensors only");
-        };
-        let Some((start, end)) = layout.contiguous_offsets() else {
-            candle_core::bail!("gelu-erf-simd: contiguous tensors only");
-        };
-        let mut out = v[start..end].to_vec();
-        out.par_chunks_mut(1 << 15).for_each(gelu_inplace);
-        Ok((CpuStorage::F32(out), layout.shape().clone()))
-    }
-}
-
-trait GeluExt {
-    fn gelu_erf_simd(&self) -> Result<Tensor>;
-}
-
-impl GeluExt for Tensor {
-    fn gelu_erf_simd(&self) -> Result<Tensor> {
-        gelu(self)
-    }
-}
-
-/// Exact GELU of a tensor (any layout), vectorized and multi-threaded.
-pub(crate) fn gelu(xs: &Tensor) -> Result<Tensor> {
-    xs.contiguous()?.apply_op1_no_bwd(&GeluErf)
-}
-
-/// `softmax(scores·scale + ab)` over the last axis, the relative-position bias `ab`
-/// (heads × N × N) broadcast over the windows: one pass per row instead of candle's scale,
-/// broadcast add and scalar-`exp` softmax (three passes over the scores).
-struct BiasedSoftmax {
-    scale: f32,
-}
-
-impl CustomOp2 for BiasedSoftmax {
-    fn name(&self) -> &'static str {
-        "biased-softmax"
-    }
-
-    fn cpu_fwd(
-        &self,
-        s1: &CpuStorage,
-        l1: &Layout,
-        s2: &CpuStorage,
-        l2: &Layout,
-    ) -> Result<(CpuStorage, Shape)> {
-        let (CpuStorage::F32(x), CpuStorage::F32(ab)) = (s1, s2) else {
-            candle_core::bail!("biased-softmax: f32 tensors only");
-        };
-        let (Some((x0, x1)), Some((b0, b1))) = (l1.contiguous_offsets(), l2.contiguous_offsets())
-        else {
-            candle_core::bail!("biased-softmax: contiguous tensors only");
-        };
-        let n = l1.shape().dims().last().copied().unwrap_or(0);
-        let per_bias = b1 - b0;
-        if n == 0 || per_bias == 0 || (x1 - x0) % per_bias != 0 || per_bias % (n * n) != 0 {
-            candle_core::bail!(
-                "biased-softmax: scores {:?} do not repeat bias {:?}",
-                l1.shape(),
-                l2.shape()
-            );
-        }
-        let bias = &ab[b0..b1];
-        let mut out = x[x0..x1].to_vec();
-        out.par_chunks_mut(n * n)
-            .enumerate()
-            .for_each(|(i, chunk)| {
-                let b = &bias[(i * n * n) % per_bias..][..n * n];
-                softmax_rows_biased(chunk, b, n, self.scale);
-            });
-        Ok((CpuStorage::F32(out), l1.shape().clone()))
-    }
-}
+use super::tensor_ops::{BiasedSoftmax, GeluExt};
 
 const MBCONV_EXPAND_RATIO: usize = 4;
 const MLP_RATIO: usize = 4;

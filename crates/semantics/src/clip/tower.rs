@@ -3,7 +3,9 @@
 //! `nn.MultiheadAttention` (packed `in_proj`, scale `1/√head_dim` on the queries).
 
 use candle_core::{Module, Tensor, D};
-use candle_nn::{LayerNorm, Linear};
+use candle_nn::LayerNorm;
+
+use crate::sam::dense::{Dense, Then};
 
 use super::config::Activation;
 use super::weights::Weights;
@@ -21,20 +23,22 @@ pub fn layer_norm(w: &Weights, prefix: &str, width: usize) -> Result<LayerNorm, 
     ))
 }
 
-fn linear(w: &Weights, prefix: &str, out: usize, inp: usize) -> Result<Linear, ClipError> {
-    Ok(Linear::new(
-        w.get(&format!("{prefix}.weight"), &[out, inp])?,
-        Some(w.get(&format!("{prefix}.bias"), &[out])?),
-    ))
+/// `nn.Linear(inp, out)` named `prefix`, run as one multi-threaded pass with its bias (and
+/// GELU or residual where the block has one; `sam/dense.rs`).
+fn linear(w: &Weights, prefix: &str, out: usize, inp: usize) -> Result<Dense, ClipError> {
+    Ok(Dense::from_tensors(
+        &w.get(&format!("{prefix}.weight"), &[out, inp])?,
+        &w.get(&format!("{prefix}.bias"), &[out])?,
+    )?)
 }
 
 struct Block {
     ln_1: LayerNorm,
-    in_proj: Linear,
-    out_proj: Linear,
+    in_proj: Dense,
+    out_proj: Dense,
     ln_2: LayerNorm,
-    c_fc: Linear,
-    c_proj: Linear,
+    c_fc: Dense,
+    c_proj: Dense,
 }
 
 /// A stack of residual attention blocks.
@@ -64,10 +68,10 @@ impl Transformer {
                 let p = format!("{prefix}.resblocks.{i}");
                 Ok(Block {
                     ln_1: layer_norm(w, &format!("{p}.ln_1"), width)?,
-                    in_proj: Linear::new(
-                        w.get(&format!("{p}.attn.in_proj_weight"), &[3 * width, width])?,
-                        Some(w.get(&format!("{p}.attn.in_proj_bias"), &[3 * width])?),
-                    ),
+                    in_proj: Dense::from_tensors(
+                        &w.get(&format!("{p}.attn.in_proj_weight"), &[3 * width, width])?,
+                        &w.get(&format!("{p}.attn.in_proj_bias"), &[3 * width])?,
+                    )?,
                     out_proj: linear(w, &format!("{p}.attn.out_proj"), width, width)?,
                     ln_2: layer_norm(w, &format!("{p}.ln_2"), width)?,
                     c_fc: linear(w, &format!("{p}.mlp.c_fc"), mlp_width, width)?,
@@ -87,23 +91,33 @@ impl Transformer {
     pub fn forward(&self, x: &Tensor, mask: Option<&Tensor>) -> Result<Tensor, ClipError> {
         let mut x = x.clone();
         for b in &self.blocks {
-            x = (&x + self.attention(b, &b.ln_1.forward(&x)?, mask)?)?;
-            let h = b.c_fc.forward(&b.ln_2.forward(&x)?)?;
+            x = self.attention(b, &b.ln_1.forward(&x)?, mask, &x)?;
+            let n = b.ln_2.forward(&x)?;
             let h = match self.activation {
-                Activation::Gelu => h.gelu_erf()?,
-                Activation::QuickGelu => (&h * candle_nn::ops::sigmoid(&(&h * 1.702)?)?)?,
+                Activation::Gelu => b.c_fc.forward(&n, Then::Gelu)?,
+                Activation::QuickGelu => {
+                    let h = b.c_fc.forward(&n, Then::Nothing)?;
+                    (&h * candle_nn::ops::sigmoid(&(&h * 1.702)?)?)?
+                }
             };
-            x = (x + b.c_proj.forward(&h)?)?;
+            x = b.c_proj.forward_add(&h, &x)?;
         }
         Ok(x)
     }
 
-    fn attention(&self, b: &Block, x: &Tensor, mask: Option<&Tensor>) -> Result<Tensor, ClipError> {
+    /// `residual + attn(x)`.
+    fn attention(
+        &self,
+        b: &Block,
+        x: &Tensor,
+        mask: Option<&Tensor>,
+        residual: &Tensor,
+    ) -> Result<Tensor, ClipError> {
         let (batch, tokens, _) = x.dims3()?;
         let head_dim = self.width / self.heads;
         let qkv = b
             .in_proj
-            .forward(x)?
+            .forward(x, Then::Nothing)?
             .reshape((batch, tokens, 3, self.heads, head_dim))?;
         // (3, batch, heads, tokens, head_dim)
         let qkv = qkv.permute((2, 0, 3, 1, 4))?;
@@ -119,7 +133,7 @@ impl Transformer {
             .matmul(&v)?
             .transpose(1, 2)?
             .reshape((batch, tokens, self.width))?;
-        Ok(b.out_proj.forward(&out)?)
+        Ok(b.out_proj.forward_add(&out, residual)?)
     }
 }
 

@@ -1,4 +1,4 @@
-//! TinyViT's `nn.Linear` layers as one pass each: `y = x·Wᵀ + b`, then GELU or a residual
+//! `nn.Linear` layers (TinyViT's, and CLIP's towers') as one pass each: `y = x·Wᵀ + b`, then GELU or a residual
 //! added when asked, over blocks of rows split across rayon's threads. Candle's `Linear` runs
 //! the product and then a separate broadcast add for the bias (single-threaded in candle-core
 //! 0.9), and the GELU and residual were further passes over the same rows.
@@ -36,6 +36,22 @@ impl Dense {
     pub fn new(n_in: usize, n_out: usize, vb: VarBuilder) -> Result<Self> {
         let w = vb.get((n_out, n_in), "weight")?.flatten_all()?.to_vec1()?;
         let bias = vb.get(n_out, "bias")?.to_vec1()?;
+        Ok(Self {
+            wt: transpose(&w, n_out, n_in),
+            bias,
+            n_in,
+            n_out,
+        })
+    }
+
+    /// From a PyTorch-layout weight (out×in) and bias (out) already loaded (CLIP's towers).
+    pub fn from_tensors(weight: &Tensor, bias: &Tensor) -> Result<Self> {
+        let (n_out, n_in) = weight.dims2()?;
+        let bias = bias.to_vec1::<f32>()?;
+        if bias.len() != n_out {
+            candle_core::bail!("linear: bias of {} for {n_out} outputs", bias.len());
+        }
+        let w = weight.flatten_all()?.to_vec1::<f32>()?;
         Ok(Self {
             wt: transpose(&w, n_out, n_in),
             bias,

@@ -14,27 +14,12 @@ mod sam_common;
 
 use std::time::Instant;
 
-use sam_common::{mobile_sam_path, toycars_scene};
+use sam_common::{cpu_seconds, mobile_sam_path, toycars_scene};
 use semantics::sam::Sam;
 
 const REPS: usize = 5;
 /// TinyViT-5M plus neck at 1024² (docs/performance.md "Tracking"): 38.6 G multiply-adds.
 const ENCODER_FLOP: f64 = 2.0 * 38.6e9;
-
-/// User + system CPU seconds of this process so far, from /proc/self/stat; 0 where absent.
-fn cpu_seconds() -> f64 {
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return 0.0;
-    };
-    let rest = stat.rsplit_once(')').map(|r| r.1).unwrap_or("");
-    let f: Vec<f64> = rest
-        .split_whitespace()
-        .skip(11)
-        .take(2)
-        .filter_map(|v| v.parse().ok())
-        .collect();
-    f.iter().sum::<f64>() / 100.0
-}
 
 /// GFLOP/s of a 16384×128×512 product (the first attention stage's MLP) through candle,
 /// whose matrix products the encoder uses (all threads).

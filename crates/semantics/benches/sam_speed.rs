@@ -16,7 +16,7 @@ mod sam_common;
 use std::time::Instant;
 
 use rayon::prelude::*;
-use sam_common::{mobile_sam_path, per_object_iou, toycars_scene};
+use sam_common::{cpu_seconds, mobile_sam_path, per_object_iou, toycars_scene};
 use semantics::automask::{generate_from_embedding, AutoMasks, MaskGenConfig, Sampling};
 use semantics::sam::kernels::matmul;
 use semantics::sam::Sam;
@@ -26,23 +26,6 @@ use semantics::segment::{labels_from_gt, paint_labels};
 /// output upscaling over the 48×64 embedding cells a 480×360 frame covers, for upscaled prompts.
 const TRANSFORMER_FLOP: f64 = 0.86e9;
 const UPSCALE_FLOP: f64 = 0.61e9;
-
-/// User + system CPU seconds of this process so far (all threads), from /proc/self/stat
-/// (fields 14 and 15, in USER_HZ = 100 ticks per second on Linux); 0 where unavailable.
-fn cpu_seconds() -> f64 {
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return 0.0;
-    };
-    // The command name (field 2) may hold spaces; fields after its closing parenthesis.
-    let rest = stat.rsplit_once(')').map(|r| r.1).unwrap_or("");
-    let f: Vec<f64> = rest
-        .split_whitespace()
-        .skip(11)
-        .take(2)
-        .filter_map(|v| v.parse().ok())
-        .collect();
-    f.iter().sum::<f64>() / 100.0
-}
 
 /// GFLOP/s of the 4096×256×56 product (the folded attention shape), one thread per core.
 fn gemm_rate(threads: usize) -> f64 {

@@ -24,6 +24,7 @@ use rayon::prelude::*;
 
 use super::elementwise::{dispatch, gelu_inplace};
 use super::kernels::matmul;
+use super::tensor_ops::f32_slice;
 
 const BN_EPS: f64 = 1e-5;
 
@@ -144,25 +145,18 @@ impl CustomOp1 for Op<'_> {
     }
 
     fn cpu_fwd(&self, storage: &CpuStorage, layout: &Layout) -> Result<(CpuStorage, Shape)> {
-        let CpuStorage::F32(v) = storage else {
-            candle_core::bail!("conv-bn: f32 tensors only");
-        };
-        let (Some((start, end)), Ok((b, c, h, w))) =
-            (layout.contiguous_offsets(), layout.shape().dims4())
-        else {
-            candle_core::bail!("conv-bn: contiguous NCHW tensors only");
-        };
+        let x = f32_slice(storage, layout, "conv-bn")?;
+        let (b, c, h, w) = layout.shape().dims4()?;
         let conv = self.conv;
         if c != conv.cin {
             candle_core::bail!("conv-bn: {c} input channels, the weights take {}", conv.cin);
         }
-        let x = &v[start..end];
         let (out, oh, ow) = match &conv.kind {
             Kind::Pointwise(wt) => (pointwise(x, b, h * w, wt, conv, self.gelu), h, w),
             Kind::Depthwise3x3 { w: k, stride } => {
                 depthwise(x, (b, c, h, w), k, &conv.bias, *stride, self.gelu)
             }
-            Kind::Dense { .. } => unreachable!("dense convolutions run through candle"),
+            Kind::Dense { .. } => candle_core::bail!("conv-bn: dense kernels run through candle"),
         };
         Ok((CpuStorage::F32(out), Shape::from((b, conv.cout, oh, ow))))
     }
@@ -326,6 +320,7 @@ pub fn conv_bn_reference(
 
 #[cfg(test)]
 mod tests {
+    use super::super::tensor_ops::testing::{max_abs_diff, tensor};
     use super::*;
     use candle_core::{DType, Device};
     use std::collections::HashMap;
@@ -357,26 +352,8 @@ mod tests {
         VarBuilder::from_tensors(m, DType::F32, &Device::Cpu)
     }
 
-    fn input(shape: (usize, usize, usize, usize), seed: u64) -> Tensor {
-        let n = shape.0 * shape.1 * shape.2 * shape.3;
-        let v: Vec<f32> = (0..n)
-            .map(|i| ((i as u64 * 2654435761 + seed) % 1000) as f32 / 500.0 - 1.0)
-            .collect();
-        Tensor::from_vec(v, shape, &Device::Cpu).unwrap()
-    }
-
-    fn max_abs_diff(a: &Tensor, b: &Tensor) -> f32 {
-        assert_eq!(a.dims(), b.dims());
-        (a - b)
-            .unwrap()
-            .abs()
-            .unwrap()
-            .flatten_all()
-            .unwrap()
-            .max(0)
-            .unwrap()
-            .to_scalar()
-            .unwrap()
+    fn input((b, c, h, w): (usize, usize, usize, usize), seed: usize) -> Tensor {
+        tensor(&[b, c, h, w], seed)
     }
 
     fn check(

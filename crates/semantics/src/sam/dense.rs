@@ -13,6 +13,7 @@ use rayon::prelude::*;
 
 use super::elementwise::{add_assign, gelu_inplace};
 use super::kernels::{matmul, transpose};
+use super::tensor_ops::f32_slice;
 
 /// `nn.Linear(in, out)` with a bias.
 #[derive(Debug)]
@@ -115,16 +116,6 @@ impl Dense {
     }
 }
 
-fn f32_slice<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
-    let CpuStorage::F32(v) = s else {
-        candle_core::bail!("{what}: f32 tensors only");
-    };
-    let Some((a, b)) = l.contiguous_offsets() else {
-        candle_core::bail!("{what}: contiguous tensors only");
-    };
-    Ok(&v[a..b])
-}
-
 struct Op<'a> {
     dense: &'a Dense,
     then: Then,
@@ -185,29 +176,16 @@ pub fn linear_reference(x: &Tensor, n_in: usize, n_out: usize, vb: VarBuilder) -
 
 #[cfg(test)]
 mod tests {
+    use super::super::tensor_ops::testing::{max_abs_diff, tensor as t};
     use super::*;
     use candle_core::{DType, Device};
     use std::collections::HashMap;
-
-    fn t(shape: &[usize], seed: usize) -> Tensor {
-        let n: usize = shape.iter().product();
-        let v: Vec<f32> = (0..n)
-            .map(|i| ((i * 2654435761 + seed * 97) % 1000) as f32 / 500.0 - 1.0)
-            .collect();
-        Tensor::from_vec(v, shape, &Device::Cpu).unwrap()
-    }
 
     fn vb(n_in: usize, n_out: usize) -> VarBuilder<'static> {
         let mut m = HashMap::new();
         m.insert("weight".to_string(), (t(&[n_out, n_in], 1) * 0.3).unwrap());
         m.insert("bias".to_string(), t(&[n_out], 2));
         VarBuilder::from_tensors(m, DType::F32, &Device::Cpu)
-    }
-
-    fn max_abs_diff(a: &Tensor, b: &Tensor) -> f32 {
-        assert_eq!(a.dims(), b.dims());
-        let d = (a - b).unwrap().abs().unwrap().flatten_all().unwrap();
-        d.max(0).unwrap().to_scalar().unwrap()
     }
 
     #[test]

@@ -7,6 +7,17 @@ use rayon::prelude::*;
 
 use super::elementwise::{gelu_inplace, softmax_rows_biased};
 
+/// The f32 elements of a contiguous tensor's storage, or an error naming `op`.
+pub(crate) fn f32_slice<'a>(s: &'a CpuStorage, l: &Layout, op: &str) -> Result<&'a [f32]> {
+    let CpuStorage::F32(v) = s else {
+        candle_core::bail!("{op}: f32 tensors only");
+    };
+    let Some((a, b)) = l.contiguous_offsets() else {
+        candle_core::bail!("{op}: contiguous tensors only");
+    };
+    Ok(&v[a..b])
+}
+
 /// Exact GELU over a contiguous f32 tensor (see the module comment).
 struct GeluErf;
 
@@ -16,13 +27,7 @@ impl CustomOp1 for GeluErf {
     }
 
     fn cpu_fwd(&self, storage: &CpuStorage, layout: &Layout) -> Result<(CpuStorage, Shape)> {
-        let CpuStorage::F32(v) = storage else {
-            candle_core::bail!("gelu-erf-simd: f32 tensors only");
-        };
-        let Some((start, end)) = layout.contiguous_offsets() else {
-            candle_core::bail!("gelu-erf-simd: contiguous tensors only");
-        };
-        let mut out = v[start..end].to_vec();
+        let mut out = f32_slice(storage, layout, "gelu-erf-simd")?.to_vec();
         out.par_chunks_mut(1 << 15).for_each(gelu_inplace);
         Ok((CpuStorage::F32(out), layout.shape().clone()))
     }
@@ -62,24 +67,20 @@ impl CustomOp2 for BiasedSoftmax {
         s2: &CpuStorage,
         l2: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
-        let (CpuStorage::F32(x), CpuStorage::F32(ab)) = (s1, s2) else {
-            candle_core::bail!("biased-softmax: f32 tensors only");
-        };
-        let (Some((x0, x1)), Some((b0, b1))) = (l1.contiguous_offsets(), l2.contiguous_offsets())
-        else {
-            candle_core::bail!("biased-softmax: contiguous tensors only");
-        };
+        let (x, bias) = (
+            f32_slice(s1, l1, "biased-softmax")?,
+            f32_slice(s2, l2, "biased-softmax")?,
+        );
         let n = l1.shape().dims().last().copied().unwrap_or(0);
-        let per_bias = b1 - b0;
-        if n == 0 || per_bias == 0 || (x1 - x0) % per_bias != 0 || per_bias % (n * n) != 0 {
+        let per_bias = bias.len();
+        if n == 0 || per_bias == 0 || x.len() % per_bias != 0 || per_bias % (n * n) != 0 {
             candle_core::bail!(
                 "biased-softmax: scores {:?} do not repeat bias {:?}",
                 l1.shape(),
                 l2.shape()
             );
         }
-        let bias = &ab[b0..b1];
-        let mut out = x[x0..x1].to_vec();
+        let mut out = x.to_vec();
         out.par_chunks_mut(n * n)
             .enumerate()
             .for_each(|(i, chunk)| {
@@ -90,17 +91,36 @@ impl CustomOp2 for BiasedSoftmax {
     }
 }
 
+/// Deterministic test tensors and their comparison, shared by the encoder's layer tests.
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use candle_core::Device;
+pub(crate) mod testing {
+    use candle_core::{Device, Tensor};
 
-    fn t(shape: &[usize], seed: usize) -> Tensor {
+    /// A tensor of `shape` with values spread over [−1, 1), different per `seed`.
+    pub fn tensor(shape: &[usize], seed: usize) -> Tensor {
         let n: usize = shape.iter().product();
         let v: Vec<f32> = (0..n)
-            .map(|i| ((i * 2654435761 + seed * 97) % 1000) as f32 / 100.0 - 5.0)
+            .map(|i| ((i * 2654435761 + seed * 97) % 1000) as f32 / 500.0 - 1.0)
             .collect();
         Tensor::from_vec(v, shape, &Device::Cpu).unwrap()
+    }
+
+    /// max |a − b| over two tensors of one shape.
+    pub fn max_abs_diff(a: &Tensor, b: &Tensor) -> f32 {
+        assert_eq!(a.dims(), b.dims());
+        let d = (a - b).unwrap().abs().unwrap().flatten_all().unwrap();
+        d.max(0).unwrap().to_scalar().unwrap()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::testing::{max_abs_diff, tensor};
+    use super::*;
+
+    /// Scores over [−5, 5), the range a softmax meets.
+    fn t(shape: &[usize], seed: usize) -> Tensor {
+        (tensor(shape, seed) * 5.0).unwrap()
     }
 
     #[test]
@@ -112,16 +132,7 @@ mod tests {
             .unwrap();
         let z = (&scores * 0.3).unwrap().broadcast_add(&ab).unwrap();
         let want = candle_nn::ops::softmax_last_dim(&z).unwrap();
-        let d: f32 = (&got - &want)
-            .unwrap()
-            .abs()
-            .unwrap()
-            .flatten_all()
-            .unwrap()
-            .max(0)
-            .unwrap()
-            .to_scalar()
-            .unwrap();
+        let d = max_abs_diff(&got, &want);
         assert!(d < 1e-6, "max |Δ| = {d}");
         // A bias that does not tile the scores is an error, not a panic.
         let bad = t(&[3, 5, 5], 3);

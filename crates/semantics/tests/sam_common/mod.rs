@@ -83,3 +83,22 @@ pub fn per_object_iou(ids: &[u8], gt: &[u8], n: u8) -> Vec<f64> {
         })
         .collect()
 }
+
+/// User + system CPU seconds of this process so far (all threads), from /proc/self/stat
+/// (fields 14 and 15, in USER_HZ = 100 ticks per second on Linux); 0 where unavailable.
+/// Used by the benches, which time CPU beside wall clock.
+#[allow(dead_code)]
+pub fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    // The command name (field 2) may hold spaces; fields after its closing parenthesis.
+    let rest = stat.rsplit_once(')').map(|r| r.1).unwrap_or("");
+    let f: Vec<f64> = rest
+        .split_whitespace()
+        .skip(11)
+        .take(2)
+        .filter_map(|v| v.parse().ok())
+        .collect();
+    f.iter().sum::<f64>() / 100.0
+}

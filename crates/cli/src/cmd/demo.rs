@@ -22,8 +22,10 @@ pub struct Args {
     /// Frames of the generated sequence (every 8th is a test frame).
     #[arg(long, default_value_t = 96)]
     pub frames: usize,
-    /// Training iterations of each run (the 40k schedule rescaled).
-    #[arg(long, default_value_t = 3000)]
+    /// Training iterations of each run (the 40k schedule rescaled). 1,500 keeps the demo
+    /// within ~5 minutes on two cores; 3,000 is the schedule of the project's other
+    /// toycars measurements (docs/objects.md), about three times the demo's time.
+    #[arg(long, default_value_t = 1500)]
     pub iters: u32,
     /// Random initial Gaussians: fewer than the 40k schedule's 100k, which the field would
     /// evaluate at every step, to keep the demo short. Written to `OUT/demo.toml` for all runs.

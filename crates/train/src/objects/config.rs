@@ -14,6 +14,12 @@ pub struct ObjectsConfig {
     /// background is sharp enough to read depth from. Before it, object pixels do not
     /// reach the photometric gradient, so the background does not learn the objects.
     pub start_iter: u32,
+    /// The lift reads depth from the background, which must have seen each training view
+    /// a few times by then whatever the schedule's length: the start waits for at least
+    /// this many passes over the training views (each pass draws every view once), up to
+    /// half the schedule. On toycars at 1,500 iterations a start after two passes called a
+    /// parked car moving, after three it did not (docs/objects.md).
+    pub min_start_passes: f32,
     /// Where an object's Gaussians and motion come from. `lift` (the default): lifted from
     /// its first sighting against the static background at `start_iter`, then tracked
     /// through its masks. `field` (`adopt.rs`): the deformation field's own Gaussians inside
@@ -176,6 +182,7 @@ impl Default for ObjectsConfig {
         Self {
             enabled: false,
             start_iter: 3000,
+            min_start_passes: 3.0,
             source: ObjectSource::Lift,
             field_start_iter: 20000,
             field_max_residual: 0.05,
@@ -306,6 +313,13 @@ impl ObjectsConfig {
         }
     }
 
+    /// `start_iter` raised to `min_start_passes` over `views` training views, at most to
+    /// half of an `iterations`-long schedule (never lowered).
+    pub fn start_for_views(&self, views: usize, iterations: u32) -> u32 {
+        let passes = (f64::from(self.min_start_passes) * views as f64).ceil() as u32;
+        self.start_iter.max(passes.min(iterations / 2))
+    }
+
     /// Turns the objects on in `mode`. `rigid` sets `parts = 1`; `parts` and `auto` raise
     /// `parts` to [`MODE_PARTS`] unless the config already allows more than one; `auto`
     /// also sets `min_rigid_iou` to [`AUTO_MIN_RIGID_IOU`] unless the config sets one.
@@ -350,6 +364,12 @@ impl ObjectsConfig {
             return Err(format!(
                 "objects.static_ring_tolerance must be finite and > 1, got {}",
                 self.static_ring_tolerance
+            ));
+        }
+        if !(self.min_start_passes.is_finite() && self.min_start_passes >= 0.0) {
+            return Err(format!(
+                "objects.min_start_passes must be finite and ≥ 0, got {}",
+                self.min_start_passes
             ));
         }
         if !(0.0..=1.0).contains(&self.min_scale_confidence) {
@@ -468,6 +488,31 @@ impl ObjectsConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_start_waits_for_passes_over_the_views_up_to_half_the_schedule() {
+        // The 3,000-iteration schedule starts at 225, after more than three passes over
+        // 72 views: unchanged. Halved, its 113 is raised to three passes (216).
+        let c = ObjectsConfig::default().rescaled(40_000, 3_000);
+        assert_eq!(c.start_for_views(72, 3_000), 225);
+        let c = ObjectsConfig::default().rescaled(40_000, 1_500);
+        assert_eq!(c.start_iter, 113);
+        assert_eq!(c.start_for_views(72, 1_500), 216);
+        // A schedule too short for three passes starts at its middle, never later.
+        assert_eq!(c.start_for_views(400, 1_500), 750);
+        // 0 passes keeps the schedule's start.
+        let c = ObjectsConfig {
+            min_start_passes: 0.0,
+            ..c
+        };
+        assert_eq!(c.start_for_views(72, 1_500), 113);
+        assert!(ObjectsConfig {
+            min_start_passes: f32::NAN,
+            ..c
+        }
+        .validate()
+        .is_err());
+    }
 
     #[test]
     fn modes_set_parts_and_the_field_fallback_without_overriding_the_config() {

@@ -173,13 +173,18 @@ fn assert_bit_equal(a: &Trainer, c: &Trainer) {
 /// The tiny scene with its ground-truth instance masks as object-ID maps (what
 /// `semdynreg segment --masks gt --labels gt` writes: the same IDs, 255 = background).
 fn scene_with_id_maps() -> scene::Dataset {
-    let root = common::tiny_scene();
+    // Once per process: the tests run in parallel on the shared scene, and a copy in
+    // progress would hand another test a truncated ID map.
+    static COPIED: std::sync::OnceLock<()> = std::sync::OnceLock::new();
     let ds = common::dataset();
-    for f in &ds.train {
-        let dst = ds.semantics_path(f);
-        std::fs::create_dir_all(dst.parent().unwrap()).unwrap();
-        std::fs::copy(scene::mask_path(&root, &f.file_path), dst).unwrap();
-    }
+    COPIED.get_or_init(|| {
+        let root = common::tiny_scene();
+        for f in &ds.train {
+            let dst = ds.semantics_path(f);
+            std::fs::create_dir_all(dst.parent().unwrap()).unwrap();
+            std::fs::copy(scene::mask_path(&root, &f.file_path), dst).unwrap();
+        }
+    });
     ds
 }
 
@@ -336,7 +341,8 @@ fn point_cloud_colours_initialize_sh_dc() {
 fn objects_config(tweak: impl FnOnce(&mut ObjectsConfig)) -> train::TrainConfig {
     let mut cfg = common::small_config(80);
     cfg.objects.enabled = true;
-    cfg.objects.start_iter = 20;
+    // At iteration 20 exactly: three passes over the 18 training views would be 54.
+    (cfg.objects.start_iter, cfg.objects.min_start_passes) = (20, 0.0);
     (cfg.objects.lift_points, cfg.objects.lift_thickness) = (300, vec![0.25]);
     (cfg.objects.track_pose_iters, cfg.objects.track_shape_iters) = (5, 2);
     cfg.objects.track_refine_iters = 20;

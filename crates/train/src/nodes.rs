@@ -37,23 +37,9 @@ fn field(init: &mut NodeInit<'_>) -> Result<Option<Box<dyn Node>>> {
 /// The rigid objects' node, when `[objects] enabled`.
 fn rigid_objects(init: &mut NodeInit<'_>) -> Result<Option<Box<dyn Node>>> {
     let c = &init.cfg.objects;
-    let Some(mut node) = RigidObjects::for_run(c, init.dataset)? else {
+    let Some(mut node) = RigidObjects::for_run(c, init.dataset, init.cfg.iterations)? else {
         return Ok(None);
     };
-    if init.dataset.is_some() && c.source == crate::objects::ObjectSource::Lift {
-        let views = node.id_maps.len();
-        let at = c.start_for_views(views, init.cfg.iterations);
-        if at != c.start_iter {
-            tracing::info!(
-                scheduled = c.start_iter,
-                start = at,
-                views,
-                "objects start after {} passes over the training views (objects.min_start_passes)",
-                c.min_start_passes
-            );
-            node.cfg.start_iter = at;
-        }
-    }
     if c.residual {
         let field = crate::objects::residual::field_config(c.residual_depth, c.residual_width);
         let l = &init.cfg.lr;

@@ -166,10 +166,26 @@ impl RigidObjects {
         }
     }
 
-    /// The node of a training run (reads the training views' ID maps).
-    pub fn for_training(cfg: &ObjectsConfig, ds: &scene::Dataset) -> crate::error::Result<Self> {
+    /// The node of a training run (reads the training views' ID maps). Lifted objects
+    /// start no earlier than `min_start_passes` passes over those views
+    /// ([`ObjectsConfig::start_for_views`]).
+    pub fn for_training(
+        cfg: &ObjectsConfig,
+        ds: &scene::Dataset,
+        iterations: u32,
+    ) -> crate::error::Result<Self> {
         let maps = crate::id_maps::load(ds)?;
-        Ok(Self::new(cfg.clone(), maps, crate::id_maps::names(ds)))
+        let mut cfg = cfg.clone();
+        if cfg.source == ObjectSource::Lift {
+            let (scheduled, views) = (cfg.start_iter, maps.len());
+            cfg.start_iter = cfg.start_for_views(views, iterations);
+            if cfg.start_iter != scheduled {
+                tracing::info!(scheduled, start = cfg.start_iter, views,
+                    "objects start after {} passes over the training views (objects.min_start_passes)",
+                    cfg.min_start_passes);
+            }
+        }
+        Ok(Self::new(cfg, maps, crate::id_maps::names(ds)))
     }
 
     /// Before the objects start: zero `dL/dimage` on object pixels of training view `frame`,

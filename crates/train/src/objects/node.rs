@@ -23,13 +23,18 @@ use std::time::Instant;
 
 impl RigidObjects {
     /// The node of a run whose `[objects]` enables it: with the training views' ID maps
-    /// when `dataset` is given (training), without them for rendering a checkpoint.
-    pub fn for_run(cfg: &ObjectsConfig, dataset: Option<&scene::Dataset>) -> Result<Option<Self>> {
+    /// when `dataset` is given (training an `iterations`-long schedule), without them for
+    /// rendering a checkpoint.
+    pub fn for_run(
+        cfg: &ObjectsConfig,
+        dataset: Option<&scene::Dataset>,
+        iterations: u32,
+    ) -> Result<Option<Self>> {
         if !cfg.enabled {
             return Ok(None);
         }
         Ok(Some(match dataset {
-            Some(ds) => Self::for_training(cfg, ds)?,
+            Some(ds) => Self::for_training(cfg, ds, iterations)?,
             None => Self::new(cfg.clone(), Vec::new(), Vec::new()),
         }))
     }
